@@ -1,0 +1,3 @@
+"""PerSival: finite-element upper-limb model, sparse-grid and neural surrogates, deployment."""
+
+__version__ = "0.1.0"

@@ -1,0 +1,32 @@
+"""The `persival` command line: one subcommand per pipeline stage, plus `run` (end to end).
+
+Each stage module owns its commands; this file only wires them together so that the
+CLI stays a thin layer over the Python API.
+"""
+
+from __future__ import annotations
+
+import typer
+
+app = typer.Typer(
+    help="PerSival: FE upper-limb model -> sparse-grid / neural surrogates -> real-time deployment.",
+    no_args_is_help=True,
+    pretty_exceptions_show_locals=False,
+)
+bench_app = typer.Typer(help="Speed benchmarks (print tables).", no_args_is_help=True)
+app.add_typer(bench_app, name="bench")
+
+
+def _register() -> None:
+    # Imported here so that `persival --help` stays fast and each stage stays independent.
+    from persival.model import commands as model_commands
+    from persival.surrogate import commands as surrogate_commands
+
+    model_commands.register(app, bench_app)
+    surrogate_commands.register(app, bench_app)
+
+
+_register()
+
+if __name__ == "__main__":  # pragma: no cover
+    app()

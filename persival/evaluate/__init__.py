@@ -1,0 +1,1 @@
+"""PerSival stage: evaluate."""
