@@ -1,0 +1,125 @@
+"""The constitutive law (SPEC 3.1): stress-free reference, symmetry, objectivity, tangent."""
+
+import numpy as np
+import pytest
+
+from persival.model.material import (
+    DEFAULT_PARAMETERS,
+    force_length,
+    second_piola_kirchhoff,
+    stress_and_tangent,
+)
+
+K_BULK = 50.0
+
+
+def random_rotation(rng):
+    q, r = np.linalg.qr(rng.standard_normal((3, 3)))
+    q *= np.sign(np.diag(r))
+    if np.linalg.det(q) < 0:
+        q[:, 0] *= -1
+    return q
+
+
+def stretched_along_fibre(rng, n, fibre_stretch):
+    """Random F whose fibre stretch sqrt(a0.C a0) equals fibre_stretch (F = R U, U = lam a0 a0 + ...)."""
+    F = np.empty((n, 3, 3))
+    a0 = rng.standard_normal((n, 3))
+    a0 /= np.linalg.norm(a0, axis=1)[:, None]
+    for i in range(n):
+        G = np.eye(3) + 0.1 * rng.standard_normal((3, 3))
+        x = G @ a0[i]
+        G = G * fibre_stretch / np.linalg.norm(x)  # scales all stretches: fibre gets exactly lam
+        F[i] = random_rotation(rng) @ G
+    return F, a0
+
+
+def test_stress_free_reference_state():
+    for gm in (0.0, 0.3, 1.0):
+        S = second_piola_kirchhoff(np.eye(3), [0.0, 0.6, 0.8], 0.0, gm, K_BULK)
+        assert np.abs(S).max() < 1e-14
+
+
+def test_activation_produces_fibre_tension_at_reference():
+    a0 = np.array([0.0, 0.0, 1.0])
+    S = second_piola_kirchhoff(np.eye(3), a0, 1.0, 1.0, K_BULK)
+    f, _ = force_length(1.0)
+    # at F = I only the active term remains: S = S_max f(1) M (SPEC 3.1)
+    assert S[2, 2] == pytest.approx(DEFAULT_PARAMETERS.S_max * f, rel=1e-12)
+    assert np.abs(S - S[2, 2] * np.outer(a0, a0)).max() < 1e-14
+
+
+def test_symmetry_and_objectivity():
+    rng = np.random.default_rng(1)
+    F = np.eye(3) + 0.2 * rng.standard_normal((50, 3, 3))
+    a0 = rng.standard_normal((50, 3))
+    a0 /= np.linalg.norm(a0, axis=1)[:, None]
+    act, gm = rng.uniform(0, 1, 50), rng.uniform(0, 1, 50)
+    S = second_piola_kirchhoff(F, a0, act, gm, K_BULK, fibre_prestretch=1.2)
+    assert np.abs(S - np.swapaxes(S, 1, 2)).max() < 1e-12 * np.abs(S).max()
+    R = np.stack([random_rotation(rng) for _ in range(50)])
+    S_rot = second_piola_kirchhoff(R @ F, a0, act, gm, K_BULK, fibre_prestretch=1.2)
+    assert np.abs(S_rot - S).max() < 1e-12 * np.abs(S).max()
+    # a pure rotation is stress free
+    S_rigid = second_piola_kirchhoff(R, a0, 0.0, gm, K_BULK)
+    assert np.abs(S_rigid).max() < 1e-13
+
+
+@pytest.mark.parametrize("fibre_stretch", [0.9, 1.2, 1.5])  # below 1, between 1 and lambda_opt, above lambda_opt
+@pytest.mark.parametrize("muscle_fraction", [1.0, 0.0, 0.5])
+def test_consistent_tangent_matches_finite_differences(fibre_stretch, muscle_fraction):
+    rng = np.random.default_rng(int(fibre_stretch * 10) + int(muscle_fraction * 100))
+    n = 40
+    F, a0 = stretched_along_fibre(rng, n, fibre_stretch)
+    act = rng.uniform(0.0, 1.0, n)
+    lam = np.sqrt(np.einsum("ni,nji,njk,nk->n", a0, F, F, a0))
+    assert np.allclose(lam, fibre_stretch)
+    S, CC = stress_and_tangent(F, a0, act, muscle_fraction, K_BULK)
+    assert np.abs(CC - CC.transpose(0, 3, 4, 1, 2)).max() <= 1e-12 * np.abs(CC).max()  # major symmetry
+    assert np.abs(CC - CC.transpose(0, 2, 1, 3, 4)).max() <= 1e-12 * np.abs(CC).max()  # minor symmetry
+    h = 1e-6
+    worst = 0.0
+    for _ in range(4):
+        dF = rng.standard_normal((n, 3, 3))
+        fd = (
+            second_piola_kirchhoff(F + h * dF, a0, act, muscle_fraction, K_BULK)
+            - second_piola_kirchhoff(F - h * dF, a0, act, muscle_fraction, K_BULK)
+        ) / (2 * h)
+        dC = 0.5 * (np.swapaxes(dF, 1, 2) @ F + np.swapaxes(F, 1, 2) @ dF)  # dS = CC : dC / 2 * 2
+        analytic = np.einsum("nijkl,nkl->nij", CC, dC)
+        err = np.linalg.norm(fd - analytic, axis=(1, 2)) / np.linalg.norm(analytic, axis=(1, 2))
+        worst = max(worst, err.max())
+    assert worst < 1e-6
+
+
+def test_force_length_relation_shape():
+    p = DEFAULT_PARAMETERS
+    f, df = force_length(np.array([p.lambda_opt, 1.0, 1.6]))
+    assert f[0] == pytest.approx(1.0)
+    assert df[0] == pytest.approx(0.0, abs=1e-14)
+    # ascending branch at 1.0: exp(-|(1/1.35 - 1)/0.25|^3)
+    assert f[1] == pytest.approx(np.exp(-abs((1 / 1.35 - 1) / 0.25) ** 3), rel=1e-12)
+    assert f[2] == pytest.approx(np.exp(-abs((1.6 / 1.35 - 1) / 0.15) ** 4), rel=1e-12)
+    lam = np.linspace(0.7, 1.8, 101)
+    fd = (force_length(lam + 1e-7)[0] - force_length(lam - 1e-7)[0]) / 2e-7
+    assert np.allclose(force_length(lam)[1], fd, atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"activation": np.nan}, "activation contains NaN"),
+        ({"activation": 1.5}, r"activation must lie in \[0, 1\]"),
+        ({"activation": -0.1}, r"activation must lie in \[0, 1\]"),
+        ({"muscle_fraction": 1.2}, "muscle_fraction"),
+        ({"bulk_modulus": -1.0}, "bulk_modulus"),
+        ({"a0": [1.0, 1.0, 0.0]}, "unit vector"),
+        ({"F": np.eye(2)}, "shape"),
+        ({"F": np.diag([1.0, 1.0, -1.0])}, "inverted"),
+    ],
+)
+def test_bad_input_is_refused(kwargs, message):
+    args = {"F": np.eye(3), "a0": [0.0, 0.0, 1.0], "activation": 0.5, "muscle_fraction": 1.0, "bulk_modulus": K_BULK}
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=message):
+        second_piola_kirchhoff(**args)
