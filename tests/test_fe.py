@@ -6,7 +6,7 @@ from scipy.optimize import brentq
 
 from persival.model.assembly import MaterialField
 from persival.model.constraints import Dirichlet, RigidTie
-from persival.model.geometry import box_mesh, spindle
+from persival.model.geometry import box_mesh, spindle, spindle_material
 from persival.model.material import DEFAULT_PARAMETERS, force_length
 from persival.model.mesh import MeshError, Tet10Mesh
 from persival.model.solver import QuasiStaticSolver
@@ -109,14 +109,6 @@ def test_uniaxial_fibre_stretch_matches_analytic_stress(stretch, activation, mus
     assert solution.max_volume_change < 0.01  # nearly incompressible
 
 
-def fusiform_material(mesh, prestretch=1.0):
-    """Tendon at both ends, muscle belly in the middle, linear transition zones (SPEC 3.1)."""
-    s = mesh.cell_data["arclength"]
-    gamma_m = np.clip((np.minimum(s, 1 - s) - 0.1) / 0.1, 0.0, 1.0)
-    k = gamma_m * 100.0 + (1 - gamma_m) * 1000.0
-    return MaterialField.from_cells(4, mesh.cell_data["fibre"], gamma_m, k, prestretch)
-
-
 @pytest.fixture(scope="module")
 def small_spindle():
     return spindle(length=80.0, belly_radius=8.0, tendon_radius=3.0, mesh_size=6.0, stations=15)
@@ -125,7 +117,7 @@ def small_spindle():
 def test_newton_converges_quadratically(small_spindle, capsys):
     mesh = small_spindle
     solver = QuasiStaticSolver(
-        mesh, fusiform_material(mesh), [Dirichlet("origin", mesh.node_sets["origin"]), Dirichlet("insertion", mesh.node_sets["insertion"])]
+        mesh, spindle_material(mesh), [Dirichlet("origin", mesh.node_sets["origin"]), Dirichlet("insertion", mesh.node_sets["insertion"])]
     )
     solution = solver.solve(0.5)
     history = solution.statistics.residual_histories[-1]
@@ -146,7 +138,7 @@ def test_newton_converges_quadratically(small_spindle, capsys):
 def test_activated_spindle_shortens_belly_fibres_and_bulges(small_spindle):
     mesh = small_spindle
     solver = QuasiStaticSolver(
-        mesh, fusiform_material(mesh), [Dirichlet("origin", mesh.node_sets["origin"]), Dirichlet("insertion", mesh.node_sets["insertion"])]
+        mesh, spindle_material(mesh), [Dirichlet("origin", mesh.node_sets["origin"]), Dirichlet("insertion", mesh.node_sets["insertion"])]
     )
     solution = solver.solve(1.0)
     u = solution.displacement.ravel()
@@ -175,7 +167,7 @@ def test_tip_displacement_converges_under_mesh_refinement(capsys):
     tips, sizes = [], [8.0, 5.6, 4.0]
     for h in sizes:
         mesh = spindle(length=60.0, belly_radius=8.0, tendon_radius=4.0, mesh_size=h, stations=13)
-        solver = QuasiStaticSolver(mesh, fusiform_material(mesh), [Dirichlet("origin", mesh.node_sets["origin"])])
+        solver = QuasiStaticSolver(mesh, spindle_material(mesh), [Dirichlet("origin", mesh.node_sets["origin"])])
         solution = solver.solve(0.3)
         tip = solution.displacement[mesh.node_sets["insertion"], 2].mean()
         tips.append(tip)

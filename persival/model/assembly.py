@@ -5,8 +5,10 @@ Weak form of quasi-static equilibrium in the reference configuration:
 ``K[a i, b k] = sum_q w_q det(J_q) dN_a/dX_J A_iJkL dN_b/dX_L``,
 ``A_iJkL = dP_iJ/dF_kL = delta_ik S_JL + F_iM F_kN CC_MJNL`` (CC = 2 dS/dC).
 
-Every element and quadrature point is processed at once (numpy batched), and the global
-matrix is filled through a scatter map computed once: the sparsity pattern never changes.
+All elements are processed by one compiled kernel (numba, parallel over elements; the
+constitutive law is the same compiled point function as in :mod:`persival.model.material`),
+and the global matrix (upper triangle: K is symmetric) is filled by a gather map computed once: the sparsity
+pattern never changes.
 """
 
 from __future__ import annotations
@@ -99,20 +101,28 @@ class Tet10Assembler:
         self.n_dofs = 3 * mesh.n_nodes
         self.cell_dofs = (3 * mesh.cells[:, :, None] + np.arange(3)).reshape(-1, 30)  # (m, 30)
         self._build_pattern()
+        self._Ke: np.ndarray | None = None
 
     def _build_pattern(self) -> None:
-        """CSR pattern of the full matrix and the scatter index of every element entry."""
+        """CSR pattern of the upper triangle of K and, per nonzero, the element entries that sum into it.
+
+        The tangent is symmetric, so only entries with row <= column are assembled. Each
+        nonzero gathers its contributions (a sorted segment of element-matrix positions), which
+        parallelizes without write conflicts, unlike a scatter.
+        """
         rows = np.repeat(self.cell_dofs, 30, axis=1).ravel()
         cols = np.tile(self.cell_dofs, (1, 30)).ravel()
-        key = rows * self.n_dofs + cols
-        unique, scatter = np.unique(key, return_inverse=True)
-        self._scatter = scatter.ravel()
-        self._nnz = len(unique)
+        upper = np.flatnonzero(rows <= cols)
+        key = rows[upper] * self.n_dofs + cols[upper]
+        unique, target = np.unique(key, return_inverse=True)
+        order = np.argsort(target, kind="stable")
+        self._gather_entries = upper[order]  # positions in the flattened (m, 30, 30) element matrices
+        self._gather_ptr = np.concatenate([[0], np.cumsum(np.bincount(target, minlength=len(unique)))])
         r, c = np.divmod(unique, self.n_dofs)
-        self.pattern = sp.csr_matrix((np.zeros(self._nnz), (r, c)), shape=(self.n_dofs, self.n_dofs))
-        self.pattern.sort_indices()
         self.pattern_rows = r
         self.pattern_cols = c
+        self._indptr = np.concatenate([[0], np.cumsum(np.bincount(r, minlength=self.n_dofs))]).astype(np.int32)
+        self._indices = c.astype(np.int32)
 
     # -- kinematics ---------------------------------------------------------------------------
     def deformation_gradient(self, u: np.ndarray) -> np.ndarray:
@@ -129,8 +139,14 @@ class Tet10Assembler:
         act = np.ascontiguousarray(activation, dtype=float)
         if act.shape != (self.mesh.n_cells,):
             raise ValueError(f"activation must be given per cell, shape ({self.mesh.n_cells},), got {act.shape}")
-        fe = np.zeros((self.mesh.n_cells, 10, 3))
-        Ke = np.zeros((self.mesh.n_cells, 30, 30) if with_tangent else (self.mesh.n_cells, 0, 0))
+        fe = np.empty((self.mesh.n_cells, 10, 3))
+        if with_tangent:
+            # reused: a fresh 25 MB array per call costs more in page faults than the gather
+            if self._Ke is None:
+                self._Ke = np.empty((self.mesh.n_cells, 30, 30))
+            Ke = self._Ke
+        else:
+            Ke = np.empty((self.mesh.n_cells, 0, 0))
         bad = _element_kernel(
             ue, self.dN, self.weights, material.fibre, act, material.muscle_fraction, material.bulk_modulus,
             material.fibre_prestretch, material.parameters.packed(), with_tangent, fe, Ke,
@@ -146,18 +162,26 @@ class Tet10Assembler:
     def tangent(
         self, u: np.ndarray, material: MaterialField, activation: np.ndarray
     ) -> tuple[sp.csr_matrix, np.ndarray]:
-        """Full tangent K (CSR, n_dofs x n_dofs, fixed pattern) and internal force f_int (n_dofs,)."""
+        """Upper triangle of the tangent K (CSR, fixed pattern) and the internal force f_int (n_dofs,)."""
         f_int, Ke = self._run_kernel(u, material, activation, True)
-        data = np.zeros(self._nnz)
-        _scatter_add(data, self._scatter, Ke.reshape(-1))
-        K = sp.csr_matrix((data, self.pattern.indices, self.pattern.indptr), shape=self.pattern.shape)
+        data = np.empty(len(self._indices))
+        _gather_sum(data, self._gather_ptr, self._gather_entries, Ke.reshape(-1))
+        K = sp.csr_matrix((data, self._indices, self._indptr), shape=(self.n_dofs, self.n_dofs))
         return K, f_int
 
 
-@njit(cache=True)
-def _scatter_add(data, index, values):
-    for j in range(values.shape[0]):
-        data[index[j]] += values[j]
+def symmetric_matvec(upper: sp.csr_matrix, x: np.ndarray) -> np.ndarray:
+    """K x for a symmetric K stored as its upper triangle."""
+    return upper @ x + upper.T @ x - upper.diagonal() * x
+
+
+@njit(cache=True, parallel=True)
+def _gather_sum(data, ptr, entries, values):
+    for j in prange(data.shape[0]):
+        acc = 0.0
+        for p in range(ptr[j], ptr[j + 1]):
+            acc += values[entries[p]]
+        data[j] = acc
 
 
 @njit(cache=True, parallel=True)
@@ -176,6 +200,9 @@ def _element_kernel(ue, dN, w, a0, act, gm, k, pre, p, with_tangent, fe, Ke):
         A = np.empty((3, 3, 3, 3))
         G = np.empty((10, 3, 3, 3))
         failed = False
+        fe[e] = 0.0
+        if with_tangent:
+            Ke[e] = 0.0
         for q in range(nq):
             g = dN[e, q]
             for i in range(3):
@@ -217,12 +244,19 @@ def _element_kernel(ue, dN, w, a0, act, gm, k, pre, p, with_tangent, fe, Ke):
                     for kk in range(3):
                         for L in range(3):
                             G[a, i, kk, L] = g[a, 0] * A[i, 0, kk, L] + g[a, 1] * A[i, 1, kk, L] + g[a, 2] * A[i, 2, kk, L]
+            # K is symmetric (hyperelastic): fill the node blocks b >= a, mirror below
             for a in range(10):
                 for i in range(3):
                     r = 3 * a + i
-                    for b in range(10):
+                    for b in range(a, 10):
                         for kk in range(3):
                             Ke[e, r, 3 * b + kk] += G[a, i, kk, 0] * g[b, 0] + G[a, i, kk, 1] * g[b, 1] + G[a, i, kk, 2] * g[b, 2]
         if failed:
             bad += 1
+        elif with_tangent:  # mirror: the global upper triangle may need either orientation
+            for a in range(10):
+                for b in range(a + 1, 10):
+                    for i in range(3):
+                        for kk in range(3):
+                            Ke[e, 3 * b + kk, 3 * a + i] = Ke[e, 3 * a + i, 3 * b + kk]
     return bad

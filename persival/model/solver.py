@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from persival.model.assembly import InvertedElementError, MaterialField, Tet10Assembler
+from persival.model.assembly import InvertedElementError, MaterialField, Tet10Assembler, symmetric_matvec
 from persival.model.constraints import Dirichlet, RigidTie
 from persival.model.linear_solver import SingularMatrixError, SparseSymmetricSolver
 from persival.model.mesh import Tet10Mesh
@@ -112,7 +112,7 @@ class QuasiStaticSolver:
         free_index = np.full(n, -1, dtype=np.int64)
         free_index[self.free] = np.arange(len(self.free))
         r, c = self.assembler.pattern_rows, self.assembler.pattern_cols
-        keep = (free_index[r] >= 0) & (free_index[c] >= 0) & (r <= c)
+        keep = (free_index[r] >= 0) & (free_index[c] >= 0)
         self._ff_take = np.flatnonzero(keep)
         rows_ff, cols_ff = free_index[r[keep]], free_index[c[keep]]
         nf = len(self.free)
@@ -163,7 +163,7 @@ class QuasiStaticSolver:
             jump = u - u_start
             if np.any(jump):
                 K, _ = self._assemble(u_start, activation, stats)
-                u[self.free] += self._factorize_and_solve(K, -(K @ jump)[self.free], stats)
+                u[self.free] += self._factorize_and_solve(K, -symmetric_matvec(K, jump)[self.free], stats)
         try:
             K, f = self._assemble(u, activation, stats)
         except InvertedElementError:
