@@ -159,6 +159,7 @@ def test_polynomial_reproduction_degree_1_multilinear():
     f = lambda x: 1.5 - 2 * x[:, 0] + 0.5 * x[:, 1] * x[:, 2] + 3 * x[:, 0] * x[:, 1] * x[:, 2]  # noqa: E731
     grid.fit(f(np.asarray(grid.points)))
     x = np.random.default_rng(1).random((300, 3))
+    x[:4] = [[1, 1, 1], [0, 0, 0], [1, 0.5, 0.25], [0.5, 1, 0]]  # kinks of p = 1 at the knots
     np.testing.assert_allclose(grid.predict(x), f(x), atol=1e-12, rtol=0)
     grad = grid.gradient(x)
     np.testing.assert_allclose(grad[:, 0], -2 + 3 * x[:, 1] * x[:, 2], atol=1e-12)
@@ -257,6 +258,8 @@ def test_bad_inputs(fitted_sgpp):
         grid.predict(np.full((3, 4), 0.5))
     with pytest.raises(ValueError, match="numeric"):
         grid.predict(np.array([["a"] * 5]))
+    assert grid.predict(np.zeros((0, 5))).shape == (0,)
+    assert grid.gradient(np.zeros((0, 5))).shape == (0, 5)
     # Round-off just outside the cube is clipped, not rejected.
     x = np.full((1, 5), 1.0)
     np.testing.assert_allclose(grid.predict(x + 5e-13), grid.predict(x), atol=0)

@@ -72,10 +72,12 @@ def _piece_coefficients(p: int) -> tuple[np.ndarray, np.ndarray]:
     return vals, ders
 
 
-def _eval_pieces(y: np.ndarray, p: int, table: np.ndarray) -> np.ndarray:
+def _eval_pieces(y: np.ndarray, p: int, table: np.ndarray, left: np.ndarray | None = None) -> np.ndarray:
     # Support is [0, p+1]; outside it the spline is identically zero, which the mask enforces
     # (the clipped piece index would otherwise extrapolate the end polynomials).
     k = np.floor(y)
+    if left is not None:  # left-sided pieces where asked (derivatives at the domain's right end)
+        k = np.where(left, np.ceil(y) - 1, k)
     inside = (k >= 0) & (k <= p)
     k = np.clip(k, 0, p).astype(np.intp)
     t = y - k
@@ -93,9 +95,10 @@ def cardinal_bspline(y: np.ndarray, p: int) -> np.ndarray:
     return _eval_pieces(np.asarray(y, dtype=np.float64), p, _piece_coefficients(p)[0])
 
 
-def cardinal_bspline_dx(y: np.ndarray, p: int) -> np.ndarray:
-    """Derivative of b^p at y (right-sided at the knots, which matters only for p = 1)."""
-    return _eval_pieces(np.asarray(y, dtype=np.float64), p, _piece_coefficients(p)[1])
+def cardinal_bspline_dx(y: np.ndarray, p: int, left: np.ndarray | None = None) -> np.ndarray:
+    """Derivative of b^p at y. At the knots, where only p = 1 has a jump, it is right-sided,
+    or left-sided where the boolean mask ``left`` (broadcastable to y) is set."""
+    return _eval_pieces(np.asarray(y, dtype=np.float64), p, _piece_coefficients(p)[1], left)
 
 
 # --------------------------------------------------------------------------------------------
@@ -277,10 +280,12 @@ class SparseGrid:
         """
         y = x[:, :, None] * self._u_scale + self._u_shift
         if derivative:
-            t = cardinal_bspline_dx(y, self.degree) * self._u_scale  # chain rule: d/dx = 1/h d/dy
+            # p = 1 has kinks at the knots; at x_t = 1 only the left side lies in the domain.
+            left = (x == 1.0)[:, :, None] if self.degree == 1 else None
+            t = cardinal_bspline_dx(y, self.degree, left) * self._u_scale  # d/dx = 1/h d/dy
         else:
             t = cardinal_bspline(y, self.degree)
-        return t.reshape(x.shape[0], -1)
+        return t.reshape(x.shape[0], self.dim * self._n_u)
 
     def basis_matrix(self, x: Any, dtype: Any = np.float64) -> np.ndarray:
         """B[k, j] = phi_j(x_k) = prod_t phi_{l_jt, i_jt}(x_kt), shape (m, N)."""
@@ -343,6 +348,11 @@ class SparseGrid:
             for r in range(0, self.n_points, step)  # row blocks, bounded memory
         ]
         return scipy.sparse.vstack(blocks, format="csc")
+
+    def factorize(self) -> SparseGrid:
+        """Factorize the interpolation matrix now (``fit`` does it on first use); returns self."""
+        self._factorize()
+        return self
 
     def _factorize(self):
         """Solver for A c = f, built once per grid and reused for every fit and output."""
@@ -453,10 +463,10 @@ class SparseGrid:
         c = self._coefficients(dt)
         step = max(1, _CHUNK_ENTRIES // (self.n_points * self.dim))
         parts = []
-        for r in range(0, x.shape[0], step):  # chunks of points, bounded memory
+        for r in range(0, max(x.shape[0], 1), step):  # chunks of points, bounded memory
             xc = x[r : r + step]
             g = self._basis_gradient(xc, dt) @ c  # (dim * m, n_out): one matmul for all s
-            parts.append(g.reshape(self.dim, xc.shape[0], -1).transpose(1, 2, 0))
+            parts.append(g.reshape(self.dim, xc.shape[0], c.shape[1]).transpose(1, 2, 0))
         g = parts[0] if len(parts) == 1 else np.concatenate(parts)  # (m, n_out, dim)
         return g[:, 0, :] if self._scalar_output else g
 
@@ -542,7 +552,9 @@ class SparseGrid:
             hint = " (for one point use x[None, :])" if x.ndim == 1 and x.shape[0] == self.dim else ""
             raise ValueError(f"x must have shape (m, {self.dim}), got {x.shape}{hint}")
         x = np.asarray(x, dtype=np.float64)
-        lo, hi = x.min(initial=0.0), x.max(initial=1.0)
+        if x.size == 0:
+            return x
+        lo, hi = x.min(), x.max()
         if not (np.isfinite(lo) and np.isfinite(hi)):  # min/max propagate NaN; inf shows too
             raise ValueError("x contains NaN or inf")
         if lo < -DOMAIN_TOL or hi > 1.0 + DOMAIN_TOL:
