@@ -5,7 +5,7 @@ import pytest
 from scipy.optimize import brentq
 
 from persival.model.assembly import MaterialField
-from persival.model.constraints import Dirichlet, RigidTie
+from persival.model.constraints import Dirichlet, Hinge
 from persival.model.geometry import box_mesh, spindle, spindle_material
 from persival.model.material import DEFAULT_PARAMETERS, force_length
 from persival.model.mesh import MeshError, Tet10Mesh
@@ -180,17 +180,17 @@ def test_tip_displacement_converges_under_mesh_refinement(capsys):
     assert abs(tips[2] - tips[1]) < 0.02 * abs(tips[2])
 
 
-def test_rigid_tie_rotation_is_reproduced_without_stress():
+def test_prescribed_hinge_rotation_is_reproduced_without_stress():
     mesh = box_mesh((1, 1, 2), (10.0, 10.0, 20.0))
-    tie = RigidTie("all", np.arange(mesh.n_nodes)[np.isin(np.arange(mesh.n_nodes), np.concatenate([mesh.node_sets["z0"], mesh.node_sets["z1"]]))],
-                   centre=[0, 0, 0], axis=[1, 0, 0], end_angle=30.0)
+    ends = np.concatenate([mesh.node_sets["z0"], mesh.node_sets["z1"]])
+    tie = Hinge("all", ends, centre=[0, 0, 0], axis=[1, 0, 0], start_deg=0.0, end_deg=30.0)
     solver = QuasiStaticSolver(mesh, uniform_material(mesh), [tie])
     solution = solver.solve(0.0)
     # the free interior follows the rigid rotation and the body is stress free
     R = np.array([[1, 0, 0], [0, np.cos(np.pi / 6), -np.sin(np.pi / 6)], [0, np.sin(np.pi / 6), np.cos(np.pi / 6)]])
     expected = mesh.points @ R.T - mesh.points
     assert np.abs(solution.displacement - expected).max() < 1e-9
-    assert np.linalg.norm(solution.reactions["all"].force) < 1e-9
+    assert np.linalg.norm(solution.reactions["all"].force) < 1e-7  # N; element forces are O(10 N)
 
 
 def test_inverted_and_degenerate_meshes_are_refused():

@@ -128,7 +128,8 @@ def swept_solid_mesh(
             raise MeshError("could not identify the two end caps of the swept solid")
         gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
         gmsh.option.setNumber("Mesh.MeshSizeMin", 0.2 * mesh_size)
-        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+        # thin tendons need elements of about their radius: size from the circles' curvature
+        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 6)
         gmsh.option.setNumber("Mesh.Algorithm3D", 1)  # Delaunay: robust for smooth lofts
         gmsh.option.setNumber("Mesh.Optimize", 1)
         gmsh.option.setNumber("Mesh.ElementOrder", 2)

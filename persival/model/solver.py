@@ -9,6 +9,7 @@ and grows again after easy steps.
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 
@@ -16,9 +17,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from persival.model.assembly import InvertedElementError, MaterialField, Tet10Assembler, symmetric_matvec
-from persival.model.constraints import Dirichlet, RigidTie
+from persival.model.constraints import Dirichlet, Hinge
 from persival.model.linear_solver import SingularMatrixError, SparseSymmetricSolver
 from persival.model.mesh import Tet10Mesh
+
+
+log = logging.getLogger(__name__)
 
 
 class ConvergenceError(RuntimeError):
@@ -33,6 +37,7 @@ class SolverOptions:
     initial_step: float = 0.25
     min_step: float = 1.0 / 256.0
     max_line_search: int = 6
+    moment_atol: float = 1e-4  # N mm, hinge moment residual at convergence (free hinge)
     backend: str = "auto"
 
 
@@ -51,7 +56,7 @@ class NewtonStatistics:
 
     def as_dict(self) -> dict:
         return {
-            "steps": self.steps,
+            "load_steps": self.steps,
             "step_cuts": self.step_cuts,
             "iterations": self.iterations,
             "iterations_per_step": [len(h) - 1 for h in self.residual_histories],
@@ -76,37 +81,50 @@ class StaticSolution:
     reactions: dict[str, Reaction]
     statistics: NewtonStatistics
     max_volume_change: float  # max |det F - 1| over quadrature points
+    hinge_angle_deg: float | None = None  # the free hinge's equilibrium angle
+    hinge_moment_residual: float = 0.0  # N mm: muscles + external moment at convergence
 
 
 class QuasiStaticSolver:
-    """Solve ``f_int(u) = 0`` on the free DOFs of a tet10 body under boundary constraints."""
+    """Solve ``f_int(u) = 0`` on the free DOFs of a tet10 body under boundary constraints.
+
+    With a free :class:`Hinge`, the hinge angle is one more unknown: its equation is the
+    moment balance ``dPi/dtheta = f_h . dx_h/dtheta - M_ext(theta) = 0`` and Newton solves the
+    symmetric bordered system by a Schur complement on the factorized ``K_ff`` (two right-hand
+    sides, one factorization).
+    """
 
     def __init__(
         self,
         mesh: Tet10Mesh,
         material: MaterialField,
-        constraints: list[Dirichlet | RigidTie],
+        constraints: list[Dirichlet | Hinge],
         options: SolverOptions | None = None,
         quadrature_order: int = 2,
+        assembler: Tet10Assembler | None = None,
     ) -> None:
         self.mesh = mesh
         self.material = material
         self.constraints = list(constraints)
         self.options = options or SolverOptions()
-        self.assembler = Tet10Assembler(mesh, quadrature_order)
+        self.assembler = assembler or Tet10Assembler(mesh, quadrature_order)
         if material.fibre.shape[:2] != self.assembler.weights.shape:
             raise ValueError("material field does not match the mesh and quadrature")
         n = self.assembler.n_dofs
         constrained = np.zeros(n, dtype=bool)
         for c in self.constraints:
             dofs = c.dofs
-            if np.any(constrained[dofs]):
-                raise ValueError(f"constraint {c.name!r} overlaps another constraint")
             if dofs.max() >= n:
                 raise ValueError(f"constraint {c.name!r} refers to nodes outside the mesh")
+            if np.any(constrained[dofs]):
+                raise ValueError(f"constraint {c.name!r} overlaps another constraint")
             constrained[dofs] = True
         if constrained.all():
             raise ValueError("every degree of freedom is constrained: nothing to solve")
+        free_hinges = [c for c in self.constraints if isinstance(c, Hinge) and c.free]
+        if len(free_hinges) > 1:
+            raise ValueError("at most one free hinge is supported")
+        self.hinge: Hinge | None = free_hinges[0] if free_hinges else None
         self.constrained = constrained
         self.free = np.flatnonzero(~constrained)
         free_index = np.full(n, -1, dtype=np.int64)
@@ -119,15 +137,23 @@ class QuasiStaticSolver:
         self._ff_indptr = np.concatenate([[0], np.cumsum(np.bincount(rows_ff, minlength=nf))]).astype(np.int32)
         self._ff_indices = cols_ff.astype(np.int32)
         self.linear_solver = SparseSymmetricSolver(self.options.backend)
+        self._moment_offset = self._initial_moment_residual = 0.0
+        if self.hinge is not None:
+            # length that turns the hinge moment into a force for the combined residual norm
+            arm = np.linalg.norm(np.cross(self.mesh.points[self.hinge.nodes] - self.hinge.centre, self.hinge.axis), axis=1)
+            self._moment_length = max(float(np.sqrt(np.mean(arm**2))), 1e-12)
 
     # ------------------------------------------------------------------------------------------
     def _free_upper(self, K: sp.csr_matrix) -> sp.csr_matrix:
         n = len(self.free)
         return sp.csr_matrix((K.data[self._ff_take], self._ff_indices, self._ff_indptr), shape=(n, n))
 
-    def _apply_constraints(self, u: np.ndarray, t: float) -> None:
+    def _apply_constraints(self, u: np.ndarray, t: float, theta: float | None) -> None:
         for c in self.constraints:
-            u[c.dofs] = c.values(self.mesh.points, t)
+            if c is self.hinge:
+                u[c.dofs] = c.displacement_at(self.mesh.points, theta)
+            else:
+                u[c.dofs] = c.values(self.mesh.points, t)
 
     def _assemble(self, u, activation, stats):
         t0 = time.perf_counter()
@@ -146,59 +172,119 @@ class QuasiStaticSolver:
         stats.n_factorizations += 1
         return x
 
-    def _newton_step(self, u_start, t, activation, stats, secant=None):
-        """Solve at load factor t from the converged state u_start; return (u, K, f, history).
+    def _hinge_terms(self, u, theta, K=None, f=None):
+        """Moment residual r_theta and, with K, the border K_f,theta and K_theta,theta."""
+        h = self.hinge
+        dx, d2x = h.velocity(self.mesh.points, theta)  # per radian
+        f_h = f.reshape(-1, 3)[h.nodes]
+        M_ext, dM_ext = h.external_moment(np.radians(theta))
+        r_theta = float(np.sum(f_h * dx)) - M_ext - self._moment_offset
+        if K is None:
+            return r_theta, None, None
+        G = np.zeros(self.assembler.n_dofs)
+        G[h.dofs] = dx.ravel()
+        KG = symmetric_matvec(K, G)
+        k_tt = float(G @ KG) + float(np.sum(f_h * d2x)) - dM_ext
+        return r_theta, KG[self.free], k_tt
 
-        ``secant``: the displacement change per unit load factor over the previous step; the
-        extrapolation along it is the predictor of continuation. Without one, the free DOFs
-        follow the prescribed ones linearly (so a boundary jump does not crush the first
-        element layer).
+    def _residual_norm(self, f, r_theta):
+        norm = float(np.linalg.norm(f[self.free]))
+        if self.hinge is None:
+            return norm
+        return float(np.hypot(norm, r_theta / self._moment_length))
+
+    def _newton_step(self, u_start, theta_start, t, activation, stats, secant=None):
+        """Solve at load factor t from the converged state; return (u, theta, K, f, history).
+
+        ``secant``: (du, dtheta) over the previous step scaled to this one; the extrapolation
+        along it is the predictor of continuation. Without one (or if it folds an element), the
+        free DOFs follow the prescribed ones linearly, so a boundary jump does not crush the
+        first element layer.
         """
         opts = self.options
-        u = u_start.copy()
-        if secant is not None:
-            u += secant
-        self._apply_constraints(u, t)
-        if secant is None:
-            jump = u - u_start
-            if np.any(jump):
-                K, _ = self._assemble(u_start, activation, stats)
-                u[self.free] += self._factorize_and_solve(K, -symmetric_matvec(K, jump)[self.free], stats)
+        # residual homotopy: the initial state's moment imbalance is released along t
+        self._moment_offset = (1.0 - t) * self._initial_moment_residual
+
+        def predict(use_secant: bool):
+            u = u_start.copy()
+            theta = theta_start
+            if use_secant:
+                u += secant[0]
+                theta = None if theta is None else theta + secant[1]
+            self._apply_constraints(u, t, theta)
+            if not use_secant:
+                jump = u - u_start
+                if np.any(jump):
+                    K, _ = self._assemble(u_start, activation, stats)
+                    u[self.free] += self._factorize_and_solve(K, -symmetric_matvec(K, jump)[self.free], stats)
+            return u, theta
+
         try:
+            u, theta = predict(secant is not None)
             K, f = self._assemble(u, activation, stats)
         except InvertedElementError:
-            u = u_start.copy()
-            self._apply_constraints(u, t)
+            if secant is None:
+                raise
+            u, theta = predict(False)  # the extrapolation folded an element: predict linearly
             K, f = self._assemble(u, activation, stats)
-        r = f[self.free]
-        norm = float(np.linalg.norm(r))
+        r_theta = self._hinge_terms(u, theta, f=f)[0] if self.hinge else 0.0
+        norm = self._residual_norm(f, r_theta)
         scale = max(float(np.linalg.norm(f[self.constrained])), norm)
         tolerance = opts.rtol * scale + opts.atol
         history = [norm]
+
+        def converged():
+            return norm <= tolerance and abs(r_theta) <= max(opts.moment_atol, opts.rtol * self._moment_length * scale if self.hinge else 0.0)
+
         for _ in range(opts.max_iterations):
-            if norm <= tolerance:
-                return u, K, f, history
-            du = self._factorize_and_solve(K, -r, stats)
+            if converged():
+                return u, theta, K, f, history
+            r = f[self.free]
+            if self.hinge is None:
+                du, dtheta = self._factorize_and_solve(K, -r, stats), 0.0
+            else:
+                _, k_ft, k_tt = self._hinge_terms(u, theta, K, f)
+                x = self._factorize_and_solve(K, np.column_stack([-r, k_ft]), stats)
+                schur = k_tt - k_ft @ x[:, 1]
+                if schur == 0.0 or not np.isfinite(schur):
+                    raise SingularMatrixError("bordered hinge system is singular")
+                dtheta = (-r_theta - k_ft @ x[:, 0]) / schur
+                du = x[:, 0] - x[:, 1] * dtheta
+                dtheta = float(np.degrees(dtheta))
+            # Line search. The problem is hyperelastic, so the Newton direction should lower
+            # the potential: s(eta) = dPi/deta = d . r(u + eta d) is its slope along the
+            # direction. Accept a step that lowers the residual norm or flattens the slope
+            # (|s| <= 0.5 |s(0)|: the energy minimum along d is near); otherwise move eta by
+            # regula falsi on s. The slope test copes with the kinks of the fibre laws at
+            # lambda = 1, where the residual norm alone often refuses good steps.
+            slope0 = float(du @ r) + (np.radians(dtheta) * r_theta if self.hinge else 0.0)
             eta = 1.0
             for _ls in range(opts.max_line_search + 1):
                 trial = u.copy()
                 trial[self.free] += eta * du
+                theta_t = None if theta is None else theta + eta * dtheta
+                if self.hinge is not None:
+                    self._apply_constraints(trial, t, theta_t)
                 try:
                     K_t, f_t = self._assemble(trial, activation, stats)
-                    norm_t = float(np.linalg.norm(f_t[self.free]))
-                    if norm_t < (1.0 - 1e-4 * eta) * norm or norm_t <= tolerance:
+                    r_theta_t = self._hinge_terms(trial, theta_t, f=f_t)[0] if self.hinge else 0.0
+                    norm_t = self._residual_norm(f_t, r_theta_t)
+                    slope = float(du @ f_t[self.free]) + (np.radians(dtheta) * r_theta_t if self.hinge else 0.0)
+                    if norm_t < (1.0 - 1e-4 * eta) * norm or norm_t <= tolerance or (slope0 < 0 and abs(slope) <= 0.5 * abs(slope0)):
                         break
+                    if slope0 < 0 < slope:  # overshot the minimum along d: interpolate
+                        eta = min(max(eta * slope0 / (slope0 - slope), 0.1 * eta), 0.9 * eta)
+                        continue
                 except InvertedElementError:
                     pass
                 eta *= 0.5
             else:
                 raise ConvergenceError("line search failed to reduce the residual")
-            u, K, f, norm = trial, K_t, f_t, norm_t
-            r = f[self.free]
+            u, theta, K, f, norm, r_theta = trial, theta_t, K_t, f_t, norm_t, r_theta_t
             history.append(norm)
             stats.iterations += 1
-        if norm <= tolerance:
-            return u, K, f, history
+        if converged():
+            return u, theta, K, f, history
         raise ConvergenceError(f"Newton did not converge in {opts.max_iterations} iterations (|r| = {norm:.3e})")
 
     def solve(
@@ -206,11 +292,14 @@ class QuasiStaticSolver:
         activation,
         initial_displacement: np.ndarray | None = None,
         initial_activation=None,
+        initial_angle: float | None = None,
         progress=None,
     ) -> StaticSolution:
         """Continue from (initial_displacement, initial_activation) at t = 0 to ``activation`` at t = 1.
 
-        ``activation`` is a scalar or per-cell array in [0, 1]. ``progress(t)`` is called after
+        ``activation`` is a scalar or per-cell array in [0, 1]. With a free hinge,
+        ``initial_angle`` (deg) starts its angle (default: the hinge's ``start_deg``); the
+        initial displacement must then be consistent with it. ``progress(t)`` is called after
         each accepted load step.
         """
         m = self.mesh.n_cells
@@ -219,42 +308,63 @@ class QuasiStaticSolver:
         u = np.zeros(self.assembler.n_dofs) if initial_displacement is None else np.asarray(initial_displacement, dtype=float).reshape(-1).copy()
         if u.shape != (self.assembler.n_dofs,) or not np.all(np.isfinite(u)):
             raise ValueError("initial_displacement must be a finite (n_nodes, 3) array")
+        theta = None
+        if self.hinge is not None:
+            theta = float(self.hinge.start_deg if initial_angle is None else initial_angle)
+            if not np.isfinite(theta):
+                raise ValueError("initial_angle must be finite")
         stats = NewtonStatistics()
         wall = time.perf_counter()
         opts = self.options
+        self._moment_offset = self._initial_moment_residual = 0.0
+        if self.hinge is not None:
+            # An unbalanced start (a state posed with theta prescribed, say) cannot take the
+            # full moment in one step: its imbalance is released gradually along t.
+            u0 = u.copy()
+            self._apply_constraints(u0, 0.0, theta)
+            try:
+                f0 = self.assembler.internal_force(u0, self.material, start)
+                self._initial_moment_residual = self._hinge_terms(u0, theta, f=f0)[0]
+            except InvertedElementError:
+                pass
         t, dt = 0.0, min(1.0, opts.initial_step)
-        K = f = None
-        rate = None  # du/dt of the last accepted step
+        f = None
+        rate = None  # (du/dt, dtheta/dt) of the last accepted step
         while t < 1.0:
             t_new = min(1.0, t + dt)
             act = start + t_new * (target - start)
-            secant = None if rate is None else (t_new - t) * rate
+            secant = None if rate is None else ((t_new - t) * rate[0], (t_new - t) * rate[1])
             try:
-                u_new, K, f, history = self._newton_step(u, t_new, act, stats, secant)
+                u_new, theta_new, _, f, history = self._newton_step(u, theta, t_new, act, stats, secant)
             except (ConvergenceError, InvertedElementError, SingularMatrixError) as exc:
+                log.debug("step t=%.4f -> %.4f failed (%s); halving", t, t_new, exc)
                 stats.step_cuts += 1
                 dt *= 0.5
                 if dt < opts.min_step:
-                    raise ConvergenceError(
-                        f"load step fell below {opts.min_step} at t = {t:.4f}: {exc}"
-                    ) from exc
+                    raise ConvergenceError(f"load step fell below {opts.min_step} at t = {t:.4f}: {exc}") from exc
                 continue
+            log.debug("step t=%.4f -> %.4f converged in %d iterations: %s", t, t_new, len(history) - 1,
+                      " ".join(f"{v:.1e}" for v in history))
             stats.residual_histories.append(history)
             stats.steps += 1
-            rate = (u_new - u) / (t_new - t)
-            u, t = u_new, t_new
+            rate = ((u_new - u) / (t_new - t), 0.0 if theta is None else (theta_new - theta) / (t_new - t))
+            u, theta, t = u_new, theta_new, t_new
             if progress is not None:
                 progress(t)
             if len(history) <= 7:
                 dt = min(2.0 * dt, 1.0)
         stats.wall_time = time.perf_counter() - wall
         if f is None:  # nothing to do: report the reactions of the initial state
-            _, f = self.assembler.tangent(u, self.material, np.broadcast_to(target, (m,)).copy())
+            f = self.assembler.internal_force(u, self.material, np.broadcast_to(target, (m,)).copy())
+        self._moment_offset = 0.0
+        r_theta = self._hinge_terms(u, theta, f=f)[0] if self.hinge is not None else 0.0
         return StaticSolution(
             displacement=u.reshape(-1, 3),
             reactions=self._reactions(u, f),
             statistics=stats,
             max_volume_change=float(np.abs(np.linalg.det(self.assembler.deformation_gradient(u)) - 1.0).max()),
+            hinge_angle_deg=theta,
+            hinge_moment_residual=r_theta,
         )
 
     def _validated_activation(self, activation, name) -> np.ndarray:

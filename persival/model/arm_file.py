@@ -1,0 +1,200 @@
+"""The upper-limb model file (TOML): schema, validation, loading (SPEC 3.3).
+
+The model is data: bones, the elbow hinge, the forearm's weight, passive joint limits, the
+five muscles (geometry, tissue layout, fibre prestretch, bulk moduli) and mesh profiles.
+Coordinates in mm. Upper-arm points are in the fixed humerus frame; forearm points are given
+in the forearm frame at theta = 0 (full extension, forearm hanging along -z) and rotate about
+the hinge axis with the elbow angle (flexion positive).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+MUSCLE_ORDER = ("biceps", "brachialis", "brachioradialis", "triceps", "anconeus")
+
+Vector = tuple[float, float, float]
+
+
+class ModelFileError(ValueError):
+    """A model file that is malformed or physically inconsistent."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Joint(_Strict):
+    centre: Vector = (0.0, 0.0, 0.0)
+    axis: Vector = (1.0, 0.0, 0.0)
+    limits_deg: tuple[float, float] = (0.0, 160.0)
+    limit_moment: float = Field(500.0, gt=0, description="N mm: passive moment at a limit")
+    limit_width_deg: float = Field(10.0, gt=0, description="deg: e-folding width of the limit moment")
+
+    @field_validator("axis")
+    @classmethod
+    def _nonzero_axis(cls, v):
+        if np.linalg.norm(v) == 0:
+            raise ValueError("joint axis must be non-zero")
+        return v
+
+    @model_validator(mode="after")
+    def _ordered_limits(self):
+        lo, hi = self.limits_deg
+        if not lo < hi:
+            raise ValueError("joint limits must satisfy lower < upper")
+        return self
+
+
+class Forearm(_Strict):
+    mass: float = Field(1.6, gt=0, description="kg, forearm plus hand")
+    centre_of_mass: float = Field(150.0, gt=0, description="mm from the elbow along the forearm")
+    gravity: float = Field(9.81, ge=0, description="m/s^2, along -z")
+
+
+class Bone(_Strict):
+    name: str
+    segment: Literal["upper_arm", "forearm"]
+    start: Vector
+    end: Vector
+    radius: float = Field(gt=0)
+
+
+class Muscle(_Strict):
+    name: str
+    action: Literal["flexor", "extensor"]
+    origin: Vector
+    insertion: Vector
+    via: list[Vector] = Field(default_factory=list, description="centre-line points, upper-arm frame")
+    mesh_angle_deg: float = Field(description="elbow angle of the stress-free mesh pose")
+    belly_radius: float = Field(gt=0)
+    tendon_radius: tuple[float, float] = Field(description="proximal, distal (mm)")
+    tendon_length: tuple[float, float] = Field(description="proximal, distal pure tendon (mm, mesh pose)")
+    transition_length: float = Field(gt=0, description="muscle-tendon blend zone (mm)")
+    fibre_prestretch: float = Field(1.0, gt=0.5, lt=2.0)
+    bulk_modulus: tuple[float, float] = Field((100.0, 1000.0), description="muscle, tendon (MPa)")
+
+    @field_validator("tendon_radius", "tendon_length", "bulk_modulus")
+    @classmethod
+    def _positive_pair(cls, v, info):
+        if min(v) <= 0:
+            raise ValueError(f"{info.field_name} must be positive, got {v}")
+        return v
+
+    @model_validator(mode="after")
+    def _belly_thicker_than_tendons(self):
+        if self.belly_radius <= max(self.tendon_radius):
+            raise ValueError(f"muscle {self.name!r}: belly_radius must exceed the tendon radii")
+        return self
+
+
+class Profile(_Strict):
+    mesh_size: float = Field(gt=0, description="default element size (mm)")
+    muscle_mesh_size: dict[str, float] = Field(default_factory=dict)
+
+    @field_validator("muscle_mesh_size")
+    @classmethod
+    def _positive_sizes(cls, v):
+        for name, h in v.items():
+            if h <= 0:
+                raise ValueError(f"mesh size of {name!r} must be positive")
+        return v
+
+
+class ArmModelFile(_Strict):
+    name: str
+    description: str = ""
+    joint: Joint = Joint()
+    forearm: Forearm = Forearm()
+    bones: list[Bone]
+    muscles: list[Muscle]
+    profiles: dict[str, Profile]
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        names = [m.name for m in self.muscles]
+        missing = [n for n in MUSCLE_ORDER if n not in names]
+        extra = [n for n in names if n not in MUSCLE_ORDER]
+        if missing or extra or len(names) != len(set(names)):
+            raise ValueError(
+                f"the model needs exactly the muscles {', '.join(MUSCLE_ORDER)}; "
+                f"missing: {missing or 'none'}, unknown or repeated: {extra or [n for n in names if names.count(n) > 1] or 'none'}"
+            )
+        lo, hi = self.joint.limits_deg
+        for m in self.muscles:
+            if not lo <= m.mesh_angle_deg <= hi:
+                raise ValueError(f"muscle {m.name!r}: mesh_angle_deg {m.mesh_angle_deg} lies outside the joint limits {self.joint.limits_deg}")
+        for bone in self.bones:
+            if bone.segment != "upper_arm":
+                continue
+            for m in self.muscles:
+                d = _distance_to_segment(np.array(m.origin), np.array(bone.start), np.array(bone.end))
+                if d < 0.9 * bone.radius:
+                    raise ValueError(
+                        f"muscle {m.name!r}: origin {m.origin} lies inside bone {bone.name!r} "
+                        f"({d:.1f} mm from its axis, radius {bone.radius} mm)"
+                    )
+        if not self.profiles:
+            raise ValueError("at least one mesh profile is required")
+        return self
+
+    def muscle(self, name: str) -> Muscle:
+        for m in self.muscles:
+            if m.name == name:
+                return m
+        raise KeyError(name)
+
+    def ordered_muscles(self) -> list[Muscle]:
+        return [self.muscle(n) for n in MUSCLE_ORDER]
+
+    def profile(self, name: str) -> Profile:
+        if name not in self.profiles:
+            raise ModelFileError(f"unknown profile {name!r}; the model defines {sorted(self.profiles)}")
+        return self.profiles[name]
+
+    def mesh_size(self, profile: str, muscle: str) -> float:
+        p = self.profile(profile)
+        return p.muscle_mesh_size.get(muscle, p.mesh_size)
+
+
+def _distance_to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    d = b - a
+    t = np.clip((p - a) @ d / (d @ d), 0.0, 1.0)
+    return float(np.linalg.norm(p - (a + t * d)))
+
+
+def default_model_path() -> Path:
+    return Path(str(resources.files("persival.model").joinpath("default_arm.toml")))
+
+
+def model_hash(text: str) -> str:
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def load_model_file(path: str | Path | None = None) -> tuple[ArmModelFile, str]:
+    """Read and validate a model file (the packaged default when ``path`` is None).
+
+    Returns the model and the sha256 of its text (provenance).
+    """
+    path = Path(path) if path is not None else default_model_path()
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ModelFileError(f"cannot read model file {path}: {exc}") from exc
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ModelFileError(f"{path}: not valid TOML: {exc}") from exc
+    try:
+        model = ArmModelFile.model_validate(data)
+    except ValidationError as exc:
+        lines = [f"{'.'.join(str(p) for p in e['loc']) or '<file>'}: {e['msg']}" for e in exc.errors()]
+        raise ModelFileError(f"{path}: invalid model file:\n  " + "\n  ".join(lines)) from None
+    return model, model_hash(text)
