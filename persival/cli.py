@@ -19,11 +19,13 @@ app.add_typer(bench_app, name="bench")
 
 def _register() -> None:
     # Imported here so that `persival --help` stays fast and each stage stays independent.
+    from persival.campaign import commands as campaign_commands
     from persival.evaluate import commands as evaluate_commands
     from persival.model import commands as model_commands
     from persival.surrogate import commands as surrogate_commands
 
     model_commands.register(app, bench_app)
+    campaign_commands.register(app, bench_app)
     surrogate_commands.register(app, bench_app)
     evaluate_commands.register(app, bench_app)
 

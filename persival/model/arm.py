@@ -183,6 +183,13 @@ class ArmModel:
         self.mesh.cell_data["muscle_fraction"] = gamma
         return MaterialField.from_cells(4, self.mesh.cell_data["fibre"], gamma, k, pre)
 
+    def line_moment_arm(self, muscle: Muscle, theta_deg: float) -> float:
+        """Moment arm (mm, flexion positive) of the straight origin-insertion line at theta."""
+        origin = np.asarray(muscle.origin, dtype=float)
+        insertion = self.forearm_point(muscle.insertion, theta_deg)
+        direction = (origin - insertion) / np.linalg.norm(origin - insertion)
+        return float(np.cross(insertion - self.centre, direction) @ self.axis)
+
     # -- loads --------------------------------------------------------------------------------
     def gravity_moment(self, theta_deg: float) -> float:
         """Moment of the forearm's weight about the hinge (N mm, flexion positive): -m g r sin(theta)."""

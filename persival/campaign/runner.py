@@ -1,0 +1,326 @@
+"""Running a campaign: every pending design point of a store, solved by a simulator, on dask or
+in-process, each finished state written to the store as soon as it arrives.
+
+Who writes: only the driver (this process). Workers return each state's outcome to it and the
+driver writes it; so exactly one process has the store open for writing (enforced by the
+store's lock), writes never race, and "written" means "in the store", whatever happens to the
+workers afterwards. The price is that each state's surfaces travel once over the dask
+connection (tens of kB to a few MB per state, negligible beside an FE solve).
+
+Scheduling: the pending points are laid along a short path (``design.solve_order``) and cut
+into contiguous chains. The driver keeps one chain per worker thread in flight and submits a
+chain's next state only when its previous one returned, pinned (softly) to the same worker, so
+that worker's cached simulator can warm-start from its neighbour. A chain that moves to
+another worker (the first died or was restarted) simply starts cold there.
+
+Time limits: ``timeout_s`` bounds each attempt. The attempt runs in a helper thread; on timeout
+the simulator's ``cancel()`` is called when it has one (the external-command simulator kills
+its process group), the state is recorded as failed ("timeout ...") and not retried. An
+in-process simulator without ``cancel()`` cannot be stopped from Python: on dask the worker
+process is restarted by its nanny; in-process (``scheduler="inline"``) the attempt is abandoned
+in a daemon thread and later states use a fresh simulator instance. A worker so stuck that it
+cannot even report (a solve holding the GIL) is caught by the driver's backstop limit and
+restarted. Without ``timeout_s`` nothing bounds a solve.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import time
+import uuid
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+
+from persival.campaign.design import Design, chunks, solve_order
+from persival.campaign.execute import StateOutcome, StateTask, solve_state
+from persival.campaign.simulator import SimulatorSpec, cached_simulator, simulator_factory
+from persival.campaign.store import CampaignStore
+
+__all__ = ["run_campaign", "INLINE"]
+
+INLINE = "inline"
+# Driver-side backstop beyond the per-attempt limits (worker start-up, queueing, cancel grace).
+_BACKSTOP_GRACE_S = 60.0
+_POLL_S = 0.5
+log = logging.getLogger(__name__)
+
+
+def _available_cores() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _check_args(design, spec, timeout_s, max_attempts, n_workers, chunk_size) -> None:
+    if not isinstance(design, Design):
+        raise TypeError(f"design must be a persival.campaign.design.Design, got {type(design).__name__}")
+    if not isinstance(spec, SimulatorSpec):
+        raise TypeError(f"spec must be a SimulatorSpec, got {type(spec).__name__}")
+    if timeout_s is not None and not (isinstance(timeout_s, (int, float)) and timeout_s > 0
+                                      and math.isfinite(timeout_s)):
+        raise ValueError(f"timeout_s must be a positive number of seconds or None, got {timeout_s!r}")
+    if isinstance(max_attempts, bool) or not isinstance(max_attempts, int) or max_attempts < 1:
+        raise ValueError(f"max_attempts must be an integer >= 1, got {max_attempts!r}")
+    if n_workers is not None and (not isinstance(n_workers, int) or n_workers < 1):
+        raise ValueError(f"n_workers must be an integer >= 1, got {n_workers!r}")
+    if chunk_size is not None and (not isinstance(chunk_size, int) or chunk_size < 1):
+        raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
+
+
+def run_campaign(
+    store_path: str | Path,
+    design: Design,
+    spec: SimulatorSpec,
+    scheduler: str | None = None,
+    n_workers: int | None = None,
+    timeout_s: float | None = None,
+    max_attempts: int = 3,
+    retry_failed: bool = False,
+    progress: bool = True,
+    chunk_size: int | None = None,
+) -> dict:
+    """Solve every pending state of the campaign ``design`` x ``spec`` into ``store_path``.
+
+    A new path creates the store; an existing store must belong to the same design and
+    simulator (else CampaignMismatchError) and only its missing states (plus failed ones with
+    ``retry_failed``) are computed. ``scheduler``: None starts a dask LocalCluster with
+    ``n_workers`` single-threaded worker processes (default: one per available core), an
+    address ("tcp://host:8786") uses an existing dask cluster, ``"inline"`` solves in this
+    process without dask. Returns the store summary plus figures of this run.
+    """
+    _check_args(design, spec, timeout_s, max_attempts, n_workers, chunk_size)
+    factory = simulator_factory(spec.kind)  # unknown kind: clear error before anything is written
+    store_path = Path(store_path)
+    if store_path.exists():
+        store = CampaignStore.open_for_writing(store_path)
+        try:
+            store.check_matches(design, spec)
+        except BaseException:
+            store.close()
+            raise
+    else:
+        reference = cached_simulator(spec, factory).reference()
+        store = CampaignStore.create(store_path, design, spec, reference)
+    t0 = time.perf_counter()
+    try:
+        pending = store.pending(retry_failed)
+        order = solve_order(design.points)
+        rank = np.empty(len(order), dtype=np.int64)
+        rank[order] = np.arange(len(order))
+        pending = pending[np.argsort(rank[pending], kind="stable")]
+        tally = {"done": 0, "failed": 0, "lost": 0}
+        if len(pending):
+            with _Progress(len(pending), enabled=progress) as bar:
+                def record(outcome: StateOutcome) -> None:
+                    _write(store, outcome)
+                    tally["done" if outcome.ok else "failed"] += 1
+                    bar.advance(tally)
+
+                run = _run_inline if scheduler == INLINE else _run_dask
+                run(store, design, spec, factory, pending, record, tally, scheduler=scheduler,
+                    n_workers=n_workers, timeout_s=timeout_s, max_attempts=max_attempts,
+                    chunk_size=chunk_size)
+        elapsed = time.perf_counter() - t0
+        summary = store.summary()
+        n_run = tally["done"] + tally["failed"]
+        summary["this_run"] = {
+            "computed": n_run, "done": tally["done"], "failed": tally["failed"],
+            "lost": tally["lost"], "elapsed_s": elapsed,
+            "states_per_hour": 3600.0 * n_run / elapsed if n_run and elapsed > 0 else None,
+        }
+        return summary
+    finally:
+        store.close()
+
+
+def _write(store: CampaignStore, o: StateOutcome) -> None:
+    stats = dict(o.statistics)
+    if o.worker:
+        stats.setdefault("worker", o.worker)
+    if o.ok:
+        store.write_done(o.index, o.elbow_angle_deg, o.positions, stats, o.wall_time_s, o.attempts)
+    else:
+        store.write_failed(o.index, o.reason, stats, o.wall_time_s, o.attempts)
+
+
+def _tasks(design: Design, indices, chain: str, timeout_s, max_attempts):
+    for i in indices:
+        yield StateTask(index=int(i), state_id=int(design.ids[i]),
+                        activations=np.array(design.points[i]), chain=chain,
+                        timeout_s=timeout_s, max_attempts=max_attempts)
+
+
+def _run_inline(store, design, spec, factory, pending, record, tally, *, timeout_s, max_attempts,
+                **_ignored) -> None:
+    # One chain along the whole path: every state can warm-start from the previous one.
+    chain = uuid.uuid4().hex
+    for task in _tasks(design, pending, chain, timeout_s, max_attempts):
+        outcome = solve_state(spec, factory, task)
+        if outcome.hung:
+            log.warning("state %d: a hung attempt is left running in a daemon thread "
+                        "(in-process mode cannot stop it)", task.index)
+        record(outcome)
+
+
+def _run_dask(store, design, spec, factory, pending, record, tally, *, scheduler, n_workers,
+              timeout_s, max_attempts, chunk_size) -> None:
+    from distributed import Client, LocalCluster
+
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(
+            n_workers=n_workers or _available_cores(), threads_per_worker=1, processes=True,
+            dashboard_address=None, silence_logs=logging.ERROR,
+        )
+        client = Client(cluster)
+    else:
+        if n_workers is not None:
+            log.warning("n_workers is ignored with an existing scheduler (%s)", scheduler)
+        client = Client(scheduler, timeout="60s")
+    try:
+        _drive(client, design, spec, factory, pending, record, tally, timeout_s=timeout_s,
+               max_attempts=max_attempts, chunk_size=chunk_size)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _drive(client, design, spec, factory, pending, record, tally, *, timeout_s, max_attempts,
+           chunk_size) -> None:
+    from distributed import wait
+
+    try:
+        from distributed.scheduler import KilledWorker
+    except ImportError:  # pragma: no cover - older distributed
+        from distributed import KilledWorker
+
+    client.wait_for_workers(1, timeout=120)
+    slots = max(1, sum(client.nthreads().values()))
+    if chunk_size is None:
+        # About four chains per worker thread: long enough for warm starts to pay, short enough
+        # to balance states of unequal cost across workers.
+        n_chains = min(len(pending), 4 * slots)
+    else:
+        n_chains = math.ceil(len(pending) / chunk_size)
+    run_id = uuid.uuid4().hex[:12]
+    queue = deque(
+        deque(_tasks(design, piece, f"{run_id}-{k}", timeout_s, max_attempts))
+        for k, piece in enumerate(chunks(pending, n_chains))
+    )
+    backstop = None if timeout_s is None else max_attempts * timeout_s + _BACKSTOP_GRACE_S
+    active: dict = {}  # future -> (chain deque, submit time, task)
+
+    def submit(chain: deque, worker: str | None) -> None:
+        task = chain.popleft()
+        placement = {"workers": [worker], "allow_other_workers": True} if worker else {}
+        fut = client.submit(solve_state, spec, factory, task, pure=False,
+                            key=f"persival-state-{task.index}-{uuid.uuid4().hex[:8]}", **placement)
+        active[fut] = (chain, time.monotonic(), task)
+
+    def next_chain(chain: deque | None, worker: str | None) -> None:
+        if chain:
+            submit(chain, worker)
+        elif queue:
+            submit(queue.popleft(), worker)
+
+    for _ in range(slots):
+        if queue:
+            submit(queue.popleft(), None)
+
+    while active:
+        try:
+            done, _ = wait(list(active), timeout=_POLL_S, return_when="FIRST_COMPLETED")
+        except TimeoutError:
+            done = set()
+        for fut in done:
+            chain, _, task = active.pop(fut)
+            worker = None
+            try:
+                outcome = fut.result()
+                worker = outcome.worker
+            except KilledWorker as exc:
+                outcome = StateOutcome(index=task.index, ok=False, attempts=max_attempts,
+                                       reason=f"worker process died while solving this state "
+                                              f"(crash or out of memory): {exc}")
+            except Exception as exc:  # lost for another reason: leave it missing for a resume
+                log.warning("state %d lost (%s: %s); it stays missing", task.index,
+                            type(exc).__name__, exc)
+                tally["lost"] += 1
+                next_chain(chain, None)
+                continue
+            record(outcome)
+            if outcome.hung and worker:
+                # Only a new process stops a simulate() that ignores cancel().
+                _restart(client, [worker])
+                worker = None
+            next_chain(chain, worker)
+        if backstop is not None:
+            now = time.monotonic()
+            for fut, (chain, started, task) in list(active.items()):
+                if now - started <= backstop:
+                    continue
+                holders = [w for w, keys in client.processing().items() if fut.key in keys]
+                if not holders:
+                    # Still waiting for a worker (e.g. SLURM jobs queued): not running, not hung.
+                    active[fut] = (chain, now, task)
+                    continue
+                fut.cancel()
+                del active[fut]
+                record(StateOutcome(index=task.index, ok=False, attempts=1, wall_time_s=now - started,
+                                    reason=f"timeout: no answer from the worker after {now - started:.0f} s "
+                                           "(worker unresponsive; restarted)"))
+                _restart(client, holders)
+                next_chain(chain, None)
+
+
+def _restart(client, workers: list[str]) -> None:
+    try:
+        client.restart_workers(workers, timeout=120, raise_for_error=False)
+    except Exception as exc:  # e.g. workers started without a nanny cannot be restarted
+        log.warning("could not restart worker(s) %s (%s: %s); a hung solve may keep occupying "
+                    "them", workers, type(exc).__name__, exc)
+
+
+class _Progress:
+    """A rich progress bar with rate and ETA, or nothing."""
+
+    def __init__(self, total: int, enabled: bool) -> None:
+        self.total, self.enabled = total, enabled
+        self._progress = None
+
+    def __enter__(self) -> _Progress:
+        if self.enabled:
+            from rich.progress import (BarColumn, MofNCompleteColumn, Progress, ProgressColumn,
+                                       TextColumn, TimeElapsedColumn, TimeRemainingColumn)
+            from rich.text import Text
+
+            class RateColumn(ProgressColumn):
+                def render(self, task):
+                    speed = task.finished_speed or task.speed
+                    if not speed:
+                        return Text("-- states/h", style="progress.data.speed")
+                    return Text(f"{speed * 3600:,.0f} states/h", style="progress.data.speed")
+
+            self._progress = Progress(
+                TextColumn("[bold]campaign"), BarColumn(), MofNCompleteColumn(),
+                TextColumn("{task.fields[info]}"), RateColumn(), TimeElapsedColumn(),
+                TextColumn("ETA"), TimeRemainingColumn(),
+            )
+            self._progress.__enter__()
+            self._task = self._progress.add_task("campaign", total=self.total, info="")
+        return self
+
+    def advance(self, tally: dict) -> None:
+        if self._progress is not None:
+            info = f"{tally['done']} done, {tally['failed']} failed"
+            self._progress.update(self._task, advance=1, info=info)
+
+    def __exit__(self, *exc) -> None:
+        if self._progress is not None:
+            self._progress.__exit__(*exc)

@@ -1,0 +1,468 @@
+"""The campaign store: one zarr (v3) directory holding a design, the reference surfaces and one
+state per design point.
+
+Layout (``n`` design points, one group per concern)::
+
+    <store>/zarr.json            attributes: format marker + version, provenance, simulator spec,
+                                 design description, surface names
+    design/ids            (n,)            int64
+    design/activations    (n, 5)          float64
+    reference/<surface>/points     (m, 3) float64 mm
+    reference/<surface>/triangles  (k, 3) int64
+    reference/<surface>/node_ids   (m,) int64, optional: the surface's node set in the full mesh
+    states/status         (n,)  int8     0 missing, 1 done, 2 failed     -- chunk = 1 state
+    states/elbow_angle_deg, wall_time_s, finished_at (n,) float64        -- chunk = 1 state
+    states/attempts       (n,)  int16                                    -- chunk = 1 state
+    states/reason, states/statistics (n,) str (statistics: json)         -- chunk = 1 state
+    states/positions/<surface> (n, m, 3) float64                         -- chunk = 1 state
+    writer.lock                  held (flock) by the one process that writes
+
+Why a state cannot be half-written: every per-state array has exactly one chunk per state, zarr
+writes each chunk file to a temporary file and renames it into place, and the status chunk is
+written last. A process killed in the middle of a state leaves that state's status "missing"
+(or its earlier "failed"), whatever arrived of its other chunks is ignored by every reader
+(``surface_positions`` and ``elbow_angles`` mask states that are not done) and overwritten when
+the state is recomputed. A finished state is never rewritten. Only one process writes (the
+campaign driver; workers return results to it), enforced with an advisory lock that the
+operating system releases when the process dies, so a kill -9 never leaves a stale lock.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import fcntl
+import json
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import persival
+from persival.campaign.design import Design
+from persival.campaign.simulator import ReferenceGeometry, SimulatorSpec, SurfaceTopology
+
+__all__ = [
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "MISSING",
+    "DONE",
+    "FAILED",
+    "STATUS_NAMES",
+    "StoreError",
+    "StoreVersionError",
+    "CampaignMismatchError",
+    "StoreBusyError",
+    "StateTable",
+    "CampaignStore",
+]
+
+FORMAT_NAME = "persival-campaign"
+FORMAT_VERSION = 1
+MISSING, DONE, FAILED = 0, 1, 2
+STATUS_NAMES = {MISSING: "missing", DONE: "done", FAILED: "failed"}
+_LOCK_NAME = "writer.lock"
+
+
+class StoreError(RuntimeError):
+    """A path that is not a usable campaign store."""
+
+
+class StoreVersionError(StoreError):
+    """A store written by another format version."""
+
+
+class CampaignMismatchError(StoreError):
+    """A store that belongs to another campaign (design or simulator differ)."""
+
+
+class StoreBusyError(StoreError):
+    """Another live process is writing to the store."""
+
+
+@dataclass
+class StateTable:
+    """Every state of a store, one row per design point, in design order."""
+
+    ids: np.ndarray  # (n,) int64
+    activations: np.ndarray  # (n, 5)
+    status: np.ndarray  # (n,) str: done / failed / missing
+    elbow_angle_deg: np.ndarray  # (n,) NaN unless done
+    wall_time_s: np.ndarray  # (n,) NaN if never attempted
+    attempts: np.ndarray  # (n,) int
+    reason: list[str]  # failure reason ("" unless failed)
+    statistics: list[dict | None]  # simulator statistics (None if never attempted)
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+
+def _json_default(obj: Any):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return str(obj)
+
+
+def _dumps(obj: Any) -> str:
+    return json.dumps(obj, default=_json_default, sort_keys=True)
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+class CampaignStore:
+    """A campaign store opened for reading (``open``) or for writing (``create`` / ``open_for_writing``)."""
+
+    def __init__(self, path: Path, group, writable: bool, lock_fd: int | None = None) -> None:
+        self.path = path
+        self._group = group
+        self._writable = writable
+        self._lock_fd = lock_fd
+        attrs = dict(group.attrs)
+        self._attrs = attrs
+        self.surface_names: list[str] = list(attrs["surfaces"])
+        # Array handles opened once: looking an array up in a zarr group reads its metadata.
+        states = group["states"]
+        self._states = {k: states[k] for k in ("status", "elbow_angle_deg", "wall_time_s",
+                                                "finished_at", "attempts", "reason", "statistics")}
+        self._positions = {name: states["positions"][name] for name in self.surface_names}
+        self._status = self._states["status"]
+        self.n_states = int(self._status.shape[0])
+
+    # ---- creation / opening ------------------------------------------------------------------
+    @classmethod
+    def create(cls, path: str | Path, design: Design, spec: SimulatorSpec,
+               reference: ReferenceGeometry) -> CampaignStore:
+        """A new, empty store for ``design`` solved by ``spec``; refuses an existing path.
+
+        Built in a temporary sibling directory and renamed into place, so a creation that is
+        interrupted never leaves a store that looks valid.
+        """
+        import zarr
+
+        path = Path(path)
+        if path.exists():
+            raise StoreError(f"{path} already exists")
+        if not path.parent.is_dir():
+            raise StoreError(f"parent directory {path.parent} does not exist")
+        tmp = path.with_name(f".{path.name}.creating-{os.getpid()}")
+        if tmp.exists():
+            shutil.rmtree(tmp)
+        n = len(design)
+        try:
+            root = zarr.open_group(str(tmp), mode="w-", zarr_format=3)
+            root.attrs.update({
+                "format": FORMAT_NAME,
+                "format_version": FORMAT_VERSION,
+                "surfaces": reference.names,
+                "simulator": json.loads(spec.to_json()),
+                "design": design.description,
+                "provenance": {
+                    "model_hash": reference.model_hash,
+                    "model": reference.description,
+                    "persival_version": persival.__version__,
+                    "design_sha256": design.digest(),
+                    "simulator_sha256": spec.digest(),
+                    "created": _now(),
+                },
+            })
+            d = root.create_group("design")
+            d.create_array("ids", data=np.asarray(design.ids, dtype=np.int64))
+            d.create_array("activations", data=np.asarray(design.points, dtype=np.float64))
+            ref = root.create_group("reference")
+            for name, surf in reference.surfaces.items():
+                g = ref.create_group(name)
+                g.create_array("points", data=surf.reference_points)
+                g.create_array("triangles", data=surf.triangles)
+                if surf.node_ids is not None:
+                    g.create_array("node_ids", data=surf.node_ids)
+            st = root.create_group("states")
+            # One chunk per state everywhere: concurrent or interrupted writes of different
+            # states never touch the same file. Flat chunk names ("c.17.0.0") rather than
+            # nested directories halve the number of inodes a campaign creates.
+            flat = {"chunk_key_encoding": {"name": "default", "separator": "."}}
+            st.create_array("status", shape=(n,), chunks=(1,), dtype="i1", fill_value=MISSING, **flat)
+            for key in ("elbow_angle_deg", "wall_time_s", "finished_at"):
+                st.create_array(key, shape=(n,), chunks=(1,), dtype="f8", fill_value=np.nan, **flat)
+            st.create_array("attempts", shape=(n,), chunks=(1,), dtype="i2", fill_value=0, **flat)
+            for key in ("reason", "statistics"):
+                st.create_array(key, shape=(n,), chunks=(1,), dtype=str, fill_value="", **flat)
+            pos = st.create_group("positions")
+            for name, surf in reference.surfaces.items():
+                m = surf.n_nodes
+                pos.create_array(name, shape=(n, m, 3), chunks=(1, m, 3), dtype="f8",
+                                 fill_value=np.nan, **flat)
+            os.rename(tmp, path)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+        return cls.open_for_writing(path)
+
+    @classmethod
+    def open(cls, path: str | Path) -> CampaignStore:
+        """Open an existing store for reading."""
+        return cls._open(Path(path), writable=False)
+
+    @classmethod
+    def open_for_writing(cls, path: str | Path) -> CampaignStore:
+        """Open an existing store as its only writer (raises StoreBusyError if one is live)."""
+        path = Path(path)
+        cls._open(path, writable=False)  # validate format before taking the lock
+        fd = os.open(path / _LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "?"
+            os.close(fd)
+            raise StoreBusyError(
+                f"{path} is being written by another live process (pid {holder}); "
+                "wait for it to finish or stop it first"
+            ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, str(os.getpid()).encode(), 0)
+        # zarr writes each chunk to "<chunk>.<uuid>.partial" and renames it; a writer killed
+        # in between leaves the temporary file behind. Only the writer may remove them.
+        for leftover in path.rglob("*.partial"):
+            leftover.unlink(missing_ok=True)
+        try:
+            return cls._open(path, writable=True, lock_fd=fd)
+        except BaseException:
+            os.close(fd)
+            raise
+
+    @classmethod
+    def _open(cls, path: Path, writable: bool, lock_fd: int | None = None) -> CampaignStore:
+        import zarr
+
+        if not path.exists():
+            raise StoreError(f"campaign store {path} does not exist")
+        if not (path / "zarr.json").is_file():
+            raise StoreError(f"{path} is not a campaign store (no zarr.json: not a zarr v3 group)")
+        try:
+            group = zarr.open_group(str(path), mode="r+" if writable else "r")
+            attrs = dict(group.attrs)
+        except Exception as exc:  # zarr raises various types for foreign / corrupt metadata
+            raise StoreError(f"{path} is not a readable zarr group: {exc}") from None
+        if attrs.get("format") != FORMAT_NAME:
+            raise StoreError(f"{path} is a zarr group but not a PerSival campaign store")
+        version = attrs.get("format_version")
+        if version != FORMAT_VERSION:
+            written_by = attrs.get("provenance", {}).get("persival_version", "unknown")
+            raise StoreVersionError(
+                f"{path} was written in campaign store format version {version} (persival "
+                f"{written_by}); this persival ({persival.__version__}) reads version "
+                f"{FORMAT_VERSION} only. Use the persival version that wrote it, or start a new "
+                "store."
+            )
+        return cls(path, group, writable, lock_fd)
+
+    def close(self) -> None:
+        if self._lock_fd is not None:
+            os.close(self._lock_fd)  # releases the flock
+            self._lock_fd = None
+        self._writable = False
+
+    def __enter__(self) -> CampaignStore:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self) -> None:  # pragma: no cover - best effort
+        try:
+            self.close()
+        except Exception:
+            pass
+
+    # ---- identity ----------------------------------------------------------------------------
+    @property
+    def provenance(self) -> dict:
+        return dict(self._attrs["provenance"])
+
+    @property
+    def spec(self) -> SimulatorSpec:
+        s = self._attrs["simulator"]
+        return SimulatorSpec(s["kind"], s.get("options", {}))
+
+    @property
+    def design(self) -> Design:
+        d = self._group["design"]
+        return Design(d["activations"][:], d["ids"][:], dict(self._attrs["design"]))
+
+    @property
+    def reference(self) -> ReferenceGeometry:
+        ref = self._group["reference"]
+        surfaces = {}
+        for name in self.surface_names:
+            g = ref[name]
+            node_ids = g["node_ids"][:] if "node_ids" in g else None
+            surfaces[name] = SurfaceTopology(name, g["points"][:], g["triangles"][:], node_ids)
+        prov = self.provenance
+        return ReferenceGeometry(surfaces, prov["model_hash"], prov.get("model", {}))
+
+    def check_matches(self, design: Design, spec: SimulatorSpec) -> None:
+        """Refuse to continue this store with another design or another simulator."""
+        problems = []
+        if spec != self.spec:
+            problems.append(f"simulator: store has {self.spec.to_json()}, requested {spec.to_json()}")
+        stored = self.design
+        if not stored.same_points(design):
+            problems.append(
+                f"design: store has {len(stored)} points ({stored.description}), requested "
+                f"{len(design)} points ({design.description}) and they differ"
+            )
+        if problems:
+            raise CampaignMismatchError(
+                f"{self.path} belongs to another campaign; " + "; ".join(problems)
+                + ". Use a new --store path, or rerun with the store's own design and simulator."
+            )
+
+    # ---- writing -----------------------------------------------------------------------------
+    def _require_writable(self) -> None:
+        if not self._writable:
+            raise StoreError(f"{self.path} is open read-only")
+
+    def _check_index(self, index: int) -> int:
+        index = int(index)
+        if not 0 <= index < self.n_states:
+            raise IndexError(f"state index {index} out of range [0, {self.n_states})")
+        if self._status[index] == DONE:
+            raise StoreError(f"state {index} is already done; finished states are never rewritten")
+        return index
+
+    def write_done(self, index: int, elbow_angle_deg: float, positions: dict[str, np.ndarray],
+                   statistics: dict, wall_time_s: float, attempts: int) -> None:
+        """Record a solved state; its status flips to done last (see module doc)."""
+        self._require_writable()
+        index = self._check_index(index)
+        if set(positions) != set(self.surface_names):
+            raise ValueError(f"positions must have exactly the surfaces {self.surface_names}, "
+                             f"got {sorted(positions)}")
+        arrays = self._positions
+        for name in self.surface_names:
+            p = np.asarray(positions[name], dtype=np.float64)
+            if p.shape != arrays[name].shape[1:]:
+                raise ValueError(f"surface {name}: positions have shape {p.shape}, "
+                                 f"the reference has {arrays[name].shape[1:]}")
+            arrays[name][index] = p
+        self._states["elbow_angle_deg"][index] = float(elbow_angle_deg)
+        self._write_common(index, "", statistics, wall_time_s, attempts)
+        self._status[index] = DONE
+
+    def write_failed(self, index: int, reason: str, statistics: dict | None, wall_time_s: float,
+                     attempts: int) -> None:
+        """Record a state that failed for good, with its reason."""
+        self._require_writable()
+        index = self._check_index(index)
+        self._states["elbow_angle_deg"][index] = np.nan
+        self._write_common(index, reason or "unknown failure", statistics or {}, wall_time_s,
+                           attempts)
+        self._status[index] = FAILED
+
+    def _write_common(self, index, reason, statistics, wall_time_s, attempts) -> None:
+        st = self._states
+        st["reason"][index] = str(reason)
+        st["statistics"][index] = _dumps(statistics)
+        st["wall_time_s"][index] = float(wall_time_s)
+        st["attempts"][index] = int(attempts)
+        st["finished_at"][index] = _dt.datetime.now(_dt.timezone.utc).timestamp()
+
+    # ---- reading -----------------------------------------------------------------------------
+    def status_codes(self) -> np.ndarray:
+        """(n,) int8: 0 missing, 1 done, 2 failed."""
+        return np.asarray(self._status[:])
+
+    def done_mask(self) -> np.ndarray:
+        return self.status_codes() == DONE
+
+    def pending(self, retry_failed: bool = False) -> np.ndarray:
+        """Indices of states still to compute: missing, plus failed if asked."""
+        codes = self.status_codes()
+        mask = codes == MISSING
+        if retry_failed:
+            mask |= codes == FAILED
+        return np.flatnonzero(mask)
+
+    def states(self) -> StateTable:
+        codes = self.status_codes()
+        st = self._states
+        stats = [json.loads(s) if s else None for s in st["statistics"][:].tolist()]
+        angles = np.asarray(st["elbow_angle_deg"][:], dtype=np.float64)
+        angles[codes != DONE] = np.nan
+        d = self._group["design"]
+        return StateTable(
+            ids=np.asarray(d["ids"][:]),
+            activations=np.asarray(d["activations"][:]),
+            status=np.array([STATUS_NAMES[int(c)] for c in codes]),
+            elbow_angle_deg=angles,
+            wall_time_s=np.asarray(st["wall_time_s"][:], dtype=np.float64),
+            attempts=np.asarray(st["attempts"][:], dtype=np.int64),
+            reason=[str(r) if c == FAILED else "" for r, c in zip(st["reason"][:].tolist(), codes)],
+            statistics=stats,
+        )
+
+    @property
+    def activations(self) -> np.ndarray:
+        return np.asarray(self._group["design/activations"][:])
+
+    @property
+    def ids(self) -> np.ndarray:
+        return np.asarray(self._group["design/ids"][:])
+
+    def elbow_angles(self) -> np.ndarray:
+        """(n,) elbow angles in degrees, NaN for states that are not done."""
+        angles = np.asarray(self._states["elbow_angle_deg"][:], dtype=np.float64)
+        angles[~self.done_mask()] = np.nan
+        return angles
+
+    def surface_positions(self, name: str, states=None) -> np.ndarray:
+        """Current node positions (n_states, n_nodes, 3) of one surface, NaN where not done.
+
+        ``states``: optional index array (rows in design order) to read only some states.
+        """
+        if name not in self.surface_names:
+            raise KeyError(f"no surface {name!r}; the store has {self.surface_names}")
+        arr = self._positions[name]
+        done = self.done_mask()
+        if states is None:
+            out = np.asarray(arr[:], dtype=np.float64)
+        else:
+            states = np.atleast_1d(np.asarray(states, dtype=np.int64))
+            out = np.asarray(arr.get_orthogonal_selection((states, slice(None), slice(None))))
+            done = done[states]
+        out[~done] = np.nan
+        return out
+
+    def summary(self) -> dict:
+        """Counts of done / failed / missing, failure reasons, and wall-time figures."""
+        codes = self.status_codes()
+        wall = np.asarray(self._states["wall_time_s"][:], dtype=np.float64)
+        reasons: dict[str, int] = {}
+        failed = np.flatnonzero(codes == FAILED)
+        if len(failed):
+            for r in self._states["reason"].get_orthogonal_selection((failed,)).tolist():
+                key = str(r).splitlines()[0][:120] if r else "unknown"
+                reasons[key] = reasons.get(key, 0) + 1
+        done = codes == DONE
+        return {
+            "path": str(self.path),
+            "total": int(len(codes)),
+            "done": int(done.sum()),
+            "failed": int((codes == FAILED).sum()),
+            "missing": int((codes == MISSING).sum()),
+            "failure_reasons": reasons,
+            "wall_time_s_total": float(np.nansum(wall)),
+            "wall_time_s_mean_done": float(wall[done].mean()) if done.any() else None,
+            "store_bytes": store_size_bytes(self.path),
+            "simulator": self._attrs["simulator"]["kind"],
+            "model_hash": self.provenance["model_hash"],
+        }
+
+
+def store_size_bytes(path: str | Path) -> int:
+    return sum(f.stat().st_size for f in Path(path).rglob("*") if f.is_file())
