@@ -3,7 +3,8 @@
 The tangent keeps its sparsity pattern for a whole solve, so PARDISO's symbolic analysis
 (fill-reducing ordering, the costly part of a first factorization) runs once per pattern and
 every Newton iteration only refactorizes numerically (phase 22). pypardiso's public
-``factorize`` repeats the analysis every time; we drive its phases directly for that reason.
+``factorize`` repeats the analysis every time and re-converts the index arrays on every call;
+we call MKL's pardiso through pypardiso's handle with index arrays converted once.
 The matrix is symmetric (hyperelastic tangent), so only the upper triangle is passed and
 PARDISO's symmetric-indefinite LDL^T (mtype -2) is used: half the memory and about half the
 flops of LU.
@@ -43,6 +44,7 @@ class SparseSymmetricSolver:
             raise ValueError(f"unknown sparse solver backend {backend!r}")
         self.backend = backend
         self._pattern: tuple[np.ndarray, np.ndarray] | None = None
+        self._pattern_arrays: tuple = (None, None)
         self._upper: sp.csr_matrix | None = None
         self._lu = None
         if backend == "pardiso":
@@ -57,16 +59,16 @@ class SparseSymmetricSolver:
             raise SingularMatrixError("tangent matrix contains NaN or inf")
         self._upper = upper
         if self.backend == "pardiso":
-            solver = self._pardiso
-            solver._check_A(upper)
-            b = np.zeros((upper.shape[0], 1))
             try:
                 if not self._same_pattern(upper):
-                    solver.set_phase(11)
-                    solver._call_pardiso(upper, b)
+                    self._pardiso._check_A(upper)  # sorted indices, no empty rows
+                    # PARDISO wants 1-based int32 index arrays: converted once per pattern
+                    self._ia = (upper.indptr + 1).astype(np.int32)
+                    self._ja = (upper.indices + 1).astype(np.int32)
+                    self._call(11, upper.data, np.zeros((upper.shape[0], 1)))
                     self._pattern = (upper.indptr.copy(), upper.indices.copy())
-                solver.set_phase(22)
-                solver._call_pardiso(upper, b)
+                    self._pattern_arrays = (upper.indptr, upper.indices)
+                self._call(22, upper.data, np.zeros((upper.shape[0], 1)))
             except Exception as exc:  # PyPardisoError
                 self._pattern = None
                 raise SingularMatrixError(f"PARDISO factorization failed: {exc}") from exc
@@ -77,9 +79,37 @@ class SparseSymmetricSolver:
             except RuntimeError as exc:
                 raise SingularMatrixError(f"SuperLU factorization failed: {exc}") from exc
 
+    def _call(self, phase: int, data: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """One PARDISO call on the cached pattern (what pypardiso's _call_pardiso does, minus
+        re-converting the index arrays on every call)."""
+        import ctypes
+
+        solver = self._pardiso
+        b = np.asfortranarray(b, dtype=np.float64)
+        x = np.zeros_like(b)
+        error = ctypes.c_int32(0)
+        int_p, double_p = ctypes.POINTER(ctypes.c_int32), ctypes.POINTER(ctypes.c_double)
+        data = np.ascontiguousarray(data, dtype=np.float64)
+        solver._mkl_pardiso(
+            solver.pt.ctypes.data_as(ctypes.POINTER(solver._pt_type[0])),
+            ctypes.byref(ctypes.c_int32(1)), ctypes.byref(ctypes.c_int32(1)),
+            ctypes.byref(ctypes.c_int32(solver.mtype)), ctypes.byref(ctypes.c_int32(phase)),
+            ctypes.byref(ctypes.c_int32(len(self._ia) - 1)),
+            data.ctypes.data_as(double_p), self._ia.ctypes.data_as(int_p), self._ja.ctypes.data_as(int_p),
+            solver.perm.ctypes.data_as(int_p),
+            ctypes.byref(ctypes.c_int32(1 if b.ndim == 1 else b.shape[1])),
+            solver.iparm.ctypes.data_as(int_p), ctypes.byref(ctypes.c_int32(solver.msglvl)),
+            b.ctypes.data_as(double_p), x.ctypes.data_as(double_p), ctypes.byref(error),
+        )
+        if error.value != 0:
+            raise _pypardiso.pardiso_wrapper.PyPardisoError(error.value)
+        return np.ascontiguousarray(x)
+
     def _same_pattern(self, upper: sp.csr_matrix) -> bool:
         if self._pattern is None:
             return False
+        if upper.indptr is self._pattern_arrays[0] and upper.indices is self._pattern_arrays[1]:
+            return True  # the same CSR object refreshed in place: no need to compare
         indptr, indices = self._pattern
         return np.array_equal(indptr, upper.indptr) and np.array_equal(indices, upper.indices)
 
@@ -87,9 +117,9 @@ class SparseSymmetricSolver:
         if self._upper is None:
             raise RuntimeError("factorize() must be called before solve()")
         if self.backend == "pardiso":
-            solver = self._pardiso
-            solver.set_phase(33)
-            x = solver._call_pardiso(self._upper, np.asfortranarray(rhs, dtype=float))
+            rhs = np.asarray(rhs, dtype=float)
+            x = self._call(33, self._upper.data, rhs if rhs.ndim == 2 else rhs[:, None])
+            x = x if rhs.ndim == 2 else x[:, 0]
         else:
             x = self._lu.solve(np.asarray(rhs, dtype=float))
         if not np.all(np.isfinite(x)):

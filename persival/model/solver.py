@@ -137,6 +137,7 @@ class QuasiStaticSolver:
         self._ff_indptr = np.concatenate([[0], np.cumsum(np.bincount(rows_ff, minlength=nf))]).astype(np.int32)
         self._ff_indices = cols_ff.astype(np.int32)
         self.linear_solver = SparseSymmetricSolver(self.options.backend)
+        self._K_ff: sp.csr_matrix | None = None
         self._moment_offset = self._initial_moment_residual = 0.0
         if self.hinge is not None:
             # length that turns the hinge moment into a force for the combined residual norm
@@ -145,8 +146,14 @@ class QuasiStaticSolver:
 
     # ------------------------------------------------------------------------------------------
     def _free_upper(self, K: sp.csr_matrix) -> sp.csr_matrix:
-        n = len(self.free)
-        return sp.csr_matrix((K.data[self._ff_take], self._ff_indices, self._ff_indptr), shape=(n, n))
+        """K_ff (upper triangle) as one persistent CSR object whose data is refreshed in place:
+        the pattern is fixed, so scipy's format checks run once."""
+        if self._K_ff is None:
+            n = len(self.free)
+            self._K_ff = sp.csr_matrix((K.data[self._ff_take], self._ff_indices, self._ff_indptr), shape=(n, n))
+        else:
+            np.take(K.data, self._ff_take, out=self._K_ff.data)
+        return self._K_ff
 
     def _apply_constraints(self, u: np.ndarray, t: float, theta: float | None) -> None:
         for c in self.constraints:
