@@ -21,6 +21,16 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     """Attach this stage's commands to the main app and the benchmark group."""
 
     @app.command()
+    def run(
+        out: Path = typer.Option(Path("results"), "--out", help="Results directory."),
+        profile: str = typer.Option("quick", "--profile", help="Mesh profile of the arm: quick or paper."),
+    ) -> None:
+        """End to end over the stages that exist: model -> FE -> campaign -> sparse-grid surrogate."""
+        from persival.pipeline import run as run_pipeline
+
+        run_pipeline(out, profile)
+
+    @app.command()
     def simulate(
         activations: str = typer.Option(..., "--activations", "-a", help="biceps,brachialis,brachioradialis,triceps,anconeus in [0,1]"),
         model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
