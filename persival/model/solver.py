@@ -39,6 +39,7 @@ class SolverOptions:
     max_line_search: int = 6
     moment_atol: float = 1e-4  # N mm, hinge moment residual at convergence (free hinge)
     max_angle_step: float = 5.0  # deg, largest hinge-angle change of one Newton iteration
+    joint_max_step: float = 15.0  # deg, largest angle change of one staggered joint iteration (ArmModel)
     backend: str = "auto"
 
 
