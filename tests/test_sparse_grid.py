@@ -19,6 +19,7 @@ def _fixture_path() -> Path | None:
     candidates = []
     if os.environ.get("PERSIVAL_FIXTURES"):
         candidates.append(Path(os.environ["PERSIVAL_FIXTURES"]) / FIXTURE_NAME)
+    candidates.append(Path(__file__).parent / "data" / FIXTURE_NAME)  # a copy kept with the tests
     candidates.append(Path(__file__).parents[1] / ".." / "shared" / "fixtures" / FIXTURE_NAME)
     for c in candidates:
         if c.is_file():
@@ -31,7 +32,7 @@ def sgpp():
     path = _fixture_path()
     if path is None:
         pytest.skip(
-            f"SG++ reference fixture {FIXTURE_NAME} not found in $PERSIVAL_FIXTURES or "
+            f"SG++ reference fixture {FIXTURE_NAME} not found in $PERSIVAL_FIXTURES, tests/data or "
             "../shared/fixtures relative to the repository"
         )
     with np.load(path) as z:
