@@ -5,7 +5,7 @@
 3. campaign  - a level-1 sparse-grid campaign (243 states) into a zarr store, with the fast analytic
                simulator until the arm's calibration lands (see README: status)
 4. surrogate - B-spline sparse grid fitted to the store (biceps surface + elbow angle), checked on
-               held-out states of the same simulator: surrogate.json + sparse_grid.npz
+               held-out states of the same simulator: surrogate.json + sg_biceps/
 """
 
 from __future__ import annotations
@@ -87,42 +87,28 @@ def campaign_stage(out: Path, level: int = 1) -> Path:
     return store
 
 
-def surrogate_stage(out: Path, store_path: Path, level: int = 1, degree: int = 3, n_test: int = 50) -> dict:
-    from persival.campaign.simulator import SimulatorSpec, make_simulator
+def surrogate_stage(out: Path, store_path: Path, n_test: int = 50) -> dict:
+    from persival.campaign.simulator import make_simulator
     from persival.campaign.store import CampaignStore
-    from persival.surrogate.sparse_grid import SparseGrid
+    from persival.surrogate.surface_surrogate import SurfaceSurrogate
 
+    surrogate = SurfaceSurrogate("biceps").fit(store_path)
+    surrogate.save(out / "sg_biceps")
     with CampaignStore.open(store_path) as store:
-        design = store.design
-        positions = store.surface_positions("biceps")
-        angles = store.elbow_angles()
-        spec = store.spec
-    grid = SparseGrid(5, level, degree)
-    rows = grid.locate(design.points)  # the store's states in the grid's order
-    n_nodes = positions.shape[1]
-    values = np.empty((len(design), 3 * n_nodes + 1))
-    values[rows] = np.column_stack([positions.reshape(len(design), -1), angles])
-    # centred fit: SG++'s boundary B-splines do not reproduce constants (docs/sparse_grid.md)
-    surrogate = grid.fit(values, center=True)
-    surrogate.save(out / "sparse_grid.npz")
-
-    simulator = make_simulator(spec)
-    rng = np.random.default_rng(0)
-    test = rng.uniform(0.0, 1.0, (n_test, 5))
+        simulator = make_simulator(store.spec)
+    test = np.random.default_rng(0).uniform(0.0, 1.0, (n_test, 5))
+    positions, angles = surrogate.predict(test)
     errors, angle_errors = [], []
-    for alpha in test:
+    for alpha, x, theta in zip(test, positions, angles):
         result, _ = simulator.simulate(alpha)
-        predicted = surrogate.predict(alpha[None])[0]
-        errors.append(np.linalg.norm(predicted[:-1].reshape(n_nodes, 3) - result.surfaces["biceps"], axis=1).max())
-        angle_errors.append(abs(predicted[-1] - result.elbow_angle_deg))
+        errors.append(np.linalg.norm(x - result.surfaces["biceps"], axis=1).max())
+        angle_errors.append(abs(theta - result.elbow_angle_deg))
     t0 = time.perf_counter()
     for _ in range(100):
         surrogate.predict(test[:1], dtype=np.float32)
     report = {
-        "grid_level": level,
-        "grid_points": len(design),
-        "degree": degree,
-        "outputs": values.shape[1],
+        **surrogate.metadata,
+        "surface_nodes": surrogate.n_nodes,
         "held_out_states": n_test,
         "max_node_error_mm": float(np.max(errors)),
         "mean_of_max_node_error_mm": float(np.mean(errors)),
@@ -158,6 +144,6 @@ def run(out: Path, profile: str = "quick") -> dict:
     console.print(f"  {out}/geometry.json, mesh_*.vtu, bone_*.vtu   (open the VTU files in ParaView)")
     console.print(f"  {out}/fe.json, spindle_alpha*.vtu")
     console.print(f"  {out}/campaign.zarr   (persival campaign status --store {out}/campaign.zarr)")
-    console.print(f"  {out}/surrogate.json, sparse_grid.npz")
+    console.print(f"  {out}/surrogate.json, {out}/sg_biceps/ (persival.surrogate.surface_surrogate.SurfaceSurrogate.load)")
     console.print("  viewer: not built yet (see README status)")
     return {"geometry": geometry, "fe": fe, "surrogate": report}
