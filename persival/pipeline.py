@@ -22,18 +22,17 @@ def _write_json(path: Path, data: dict) -> None:
 
 
 def model_stage(out: Path, profile: str = "quick") -> dict:
-    from persival.model.arm import ArmModel
-    from persival.model.output import bone_surfaces, muscle_submesh
-
     import meshio
+
+    from persival.model.arm import ArmModel
+    from persival.model.campaign import muscle_surface
+    from persival.model.output import bone_surfaces, muscle_submesh
 
     t0 = time.perf_counter()
     arm = ArmModel(profile=profile)
     geometry = {"model": arm.spec.name, "model_hash": arm.model_hash, "profile": profile, "muscles": {}}
     for muscle in arm.spec.ordered_muscles():
         nodes, cells = muscle_submesh(arm, muscle.name)
-        from persival.model.campaign import muscle_surface
-
         surface, _ = muscle_surface(arm, muscle.name)
         meshio.Mesh(arm.mesh.points[nodes], [("tetra10", cells)]).write(out / f"mesh_{muscle.name}.vtu")
         geometry["muscles"][muscle.name] = {

@@ -79,3 +79,12 @@ def test_free_hinge_reaches_moment_equilibrium(lever, capsys):
     scale = WEIGHT
     assert abs(net[1]) < 1e-4 * scale
     assert net[0] > 0 > net[2]  # stable: pushed down it lifts, pushed up it sinks
+
+    # the joint stiffness (Schur complement of the bordered Hessian) is the slope of that
+    # net moment: the derivative ArmModel's staggered joint iteration relies on
+    g, stiffness = solver.hinge_balance(active.displacement, theta_star, np.full(mesh.n_cells, 0.6))
+    slope = -(net[2] - net[0]) / np.radians(1.0)
+    with capsys.disabled():
+        print(f"joint stiffness {stiffness:.1f} N mm/rad, slope of the net moment {slope:.1f}")
+    assert abs(g) < 1e-6
+    assert stiffness == pytest.approx(slope, rel=0.05)

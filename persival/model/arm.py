@@ -123,6 +123,7 @@ class ArmModel:
             "elbow", self._tied[0], self.centre, self.axis, self._tied[1], start_deg=self.base_angle_deg,
             free=True, external_moment=self.external_moment, muscle_lines=self._lines,
         )
+        # the free elbow: its moment balance and joint stiffness drive the staggered iteration
         self.solver = QuasiStaticSolver(self.mesh, self.material, [self.elbow], self.options, assembler=self.assembler)
         # the same ties with the angle prescribed (per node: each muscle may start in its own pose)
         self._posing = Hinge(
@@ -274,14 +275,8 @@ class ArmModel:
         for key, value in solution.statistics.as_dict().items():
             if isinstance(value, (int, float)):
                 stats[key] = stats.get(key, 0) + value
-        u = solution.displacement.ravel()
-        K, f = self.assembler.tangent(u, self.material, self.cell_activation(activation))
-        # g = dPi/dtheta; dg/dtheta is the Schur complement of the bordered Hessian: the joint
-        # stiffness with the muscles re-equilibrated (SPEC 3.3, joint equilibrium)
-        self.solver._moment_offset = 0.0
-        g, k_ft, k_tt = self.solver._hinge_terms(u, theta, K, f)
-        self.solver.linear_solver.factorize(self.solver._free_upper(K))
-        dg = k_tt - k_ft @ self.solver.linear_solver.solve(k_ft)
+        # g = dPi/dtheta; dg/dtheta is the joint stiffness with the muscles re-equilibrated
+        g, dg = self.solver.hinge_balance(solution.displacement, theta, self.cell_activation(activation))
         return solution, g, dg
 
     def _equilibrium(self, target, displacement, angle, start_activations) -> ArmState:

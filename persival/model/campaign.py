@@ -8,6 +8,7 @@ from persival.campaign.simulator import ReferenceGeometry, SimulationResult, Sur
 from persival.model.arm import ArmModel, ArmState
 from persival.model.arm_file import MUSCLE_ORDER
 from persival.model.mesh import Tet10Mesh
+from persival.model.output import muscle_submesh
 from persival.model.solver import SolverOptions
 
 
@@ -21,8 +22,7 @@ def display_triangles(faces6: np.ndarray) -> np.ndarray:
 
 def muscle_surface(arm: ArmModel, name: str) -> tuple[np.ndarray, np.ndarray]:
     """Global node ids of one muscle's surface and its display triangles (local numbering)."""
-    nodes = arm.muscle_nodes[name]
-    cells = arm.mesh.cells[arm.muscle_cells[name]] - nodes[0]
+    nodes, cells = muscle_submesh(arm, name)
     body = Tet10Mesh(arm.mesh.points[nodes], cells)
     faces = body.boundary_faces()
     surface = np.unique(faces)

@@ -196,6 +196,18 @@ class QuasiStaticSolver:
         k_tt = float(G @ KG) + float(np.sum(f_h * d2x)) - dM_ext
         return r_theta, KG[self.free], k_tt
 
+    def hinge_balance(self, u: np.ndarray, theta: float, activation: np.ndarray) -> tuple[float, float]:
+        """Moment residual dPi/dtheta (N mm) of the free hinge at (u, theta) and the joint
+        stiffness with the free DOFs re-equilibrated: the Schur complement
+        k_tt - k_ft . K_ff^-1 k_ft (N mm/rad) of the bordered Hessian."""
+        if self.hinge is None:
+            raise ValueError("this problem has no free hinge")
+        self._moment_offset = 0.0
+        K, f = self.assembler.tangent(np.asarray(u, dtype=float).ravel(), self.material, activation)
+        r_theta, k_ft, k_tt = self._hinge_terms(np.asarray(u, dtype=float).ravel(), theta, K, f)
+        self.linear_solver.factorize(self._free_upper(K))
+        return r_theta, float(k_tt - k_ft @ self.linear_solver.solve(k_ft))
+
     def _residual_norm(self, f, r_theta):
         norm = float(np.linalg.norm(f[self.free]))
         if self.hinge is None:
