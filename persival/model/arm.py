@@ -133,6 +133,10 @@ class ArmModel:
         self._posing_solver = QuasiStaticSolver(self.mesh, self.material, [self._posing], self.options, assembler=self.assembler)
         self._base: ArmState | None = None
 
+    def set_options(self, options: SolverOptions) -> None:
+        """Solver options of every solve of this model (retries use smaller load steps)."""
+        self.options = self.solver.options = self._posing_solver.options = options
+
     # -- geometry -----------------------------------------------------------------------------
     def forearm_point(self, p: np.ndarray, theta_deg: float) -> np.ndarray:
         """A forearm-frame point (given at theta = 0) at elbow angle theta."""

@@ -51,8 +51,8 @@ class ArmSimulator:
         )
 
     def simulate(self, activations, warm_start: ArmState | None = None, attempt: int = 0):
-        if attempt:  # retries: smaller first load steps
-            self.arm.solver.options = SolverOptions(initial_step=0.25 / 2**attempt)
+        # retries: smaller first load steps
+        self.arm.set_options(SolverOptions(initial_step=0.25 / 2**attempt))
         state = self.arm.solve(activations, warm_start=warm_start)
         x = self.arm.mesh.points + state.displacement
         result = SimulationResult(
