@@ -77,3 +77,21 @@ def test_paper_profile_biceps_surface_has_about_2809_nodes():
     n = len(mesh.surface_nodes())
     print(f"paper-profile biceps: {mesh.n_cells} tet10, {n} surface nodes")
     assert abs(n - 2809) <= 0.1 * 2809
+
+
+def test_simulate_command_refuses_bad_input_before_meshing(tmp_path):
+    from typer.testing import CliRunner
+
+    from persival.cli import app
+
+    runner = CliRunner()
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["simulate", "-a", "0.5,0,0", "--out", str(out)])
+    assert result.exit_code != 0 and "need 5 activations" in result.output
+    result = runner.invoke(app, ["simulate", "-a", "1.5,0,0,0,0", "--out", str(out)])
+    assert result.exit_code == 2 and "[0, 1]" in result.output
+    bad = tmp_path / "bad.toml"
+    bad.write_text("name = [")
+    result = runner.invoke(app, ["simulate", "-a", "0.5,0,0,0,0", "--model", str(bad), "--out", str(out)])
+    assert result.exit_code == 2 and "not valid TOML" in result.output
+    assert not out.exists()  # nothing written
