@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.model.arm_file import MUSCLE_ORDER, ArmModelFile, Muscle, load_model_file
+from persival.model.arm_file import MUSCLE_ORDER, Muscle, load_model_file
 from persival.model.assembly import MaterialField, Tet10Assembler
 from persival.model.constraints import Hinge
 from persival.model.geometry import swept_solid_mesh
@@ -152,15 +152,17 @@ class ArmModel:
         s = np.linspace(0.0, cum[-1], stations)
         return np.column_stack([np.interp(s, cum, knots[:, k]) for k in range(3)])
 
+    def centre_line_length(self, muscle: Muscle) -> float:
+        """Length (mm) of the muscle's centre line in its mesh pose: the scale of its tissue layout."""
+        return float(np.linalg.norm(np.diff(self.centre_line(muscle), axis=0), axis=1).sum())
+
     def _build_mesh(self):
         points, cells, node_sets, cell_data = [], [], {}, {"muscle": [], "fibre": [], "arclength": []}
         muscle_cells, muscle_nodes = {}, {}
         offset = 0
         for index, muscle in enumerate(self.spec.ordered_muscles()):
             line = self.centre_line(muscle)
-            length = float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum())
-            s = np.linspace(0.0, 1.0, len(line))
-            radius, _ = muscle_profile(muscle, s, length)
+            radius, _ = muscle_profile(muscle, np.linspace(0.0, 1.0, len(line)), self.centre_line_length(muscle))
             mesh = swept_solid_mesh(line, radius, self.spec.mesh_size(self.profile, muscle.name))
             points.append(mesh.points)
             cells.append(mesh.cells + offset)
@@ -185,9 +187,7 @@ class ArmModel:
         gamma, k, pre = np.empty(n), np.empty(n), np.empty(n)
         for muscle in self.spec.ordered_muscles():
             cells = self.muscle_cells[muscle.name]
-            line = self.centre_line(muscle)
-            length = float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum())
-            _, g = muscle_profile(muscle, self.mesh.cell_data["arclength"][cells], length)
+            _, g = muscle_profile(muscle, self.mesh.cell_data["arclength"][cells], self.centre_line_length(muscle))
             gamma[cells] = g
             k[cells] = g * muscle.bulk_modulus[0] + (1.0 - g) * muscle.bulk_modulus[1]
             pre[cells] = muscle.fibre_prestretch
