@@ -19,6 +19,7 @@ import numpy as np
 from persival.model.arm_file import MUSCLE_ORDER, Muscle, load_model_file
 from persival.model.assembly import MaterialField, Tet10Assembler
 from persival.model.constraints import Hinge
+from persival.model.muscle_unit import MuscleState, MuscleUnit, line_rotation
 from persival.model.geometry import swept_solid_mesh
 from persival.model.mesh import Tet10Mesh
 from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
@@ -60,12 +61,13 @@ class ArmState:
 
     activations: np.ndarray  # (5,) biceps, brachialis, brachioradialis, triceps, anconeus
     elbow_angle_deg: float
-    displacement: np.ndarray  # (n_nodes, 3) mm, all muscles
+    displacement: np.ndarray  # (n_nodes, 3) mm, all muscles, world frame
     moment_residual: float  # N mm at convergence
     muscle_moments: dict[str, float]  # N mm about the hinge axis (flexion positive)
-    muscle_forces: dict[str, float]  # N, magnitude of the insertion force
+    muscle_forces: dict[str, float]  # N, tension of each muscle (negative: pushing, slack)
     external_moment: float  # N mm, gravity + passive joint
     max_volume_change: float
+    muscle_states: dict[str, MuscleState] = field(default_factory=dict, repr=False)
     statistics: dict = field(default_factory=dict)
     wall_time_s: float = 0.0
 
@@ -86,12 +88,14 @@ class ArmState:
 class ArmModel:
     """The FE upper limb: ``solve(activations) -> ArmState`` (SPEC 3.3).
 
-    Meshing happens once at construction; the activation-free equilibrium (the hanging arm)
-    is solved once and cached, and every other state continues from it or from a nearby
-    solved state given as ``warm_start``.
+    Meshing happens once at construction. Every muscle is its own FE problem
+    (:class:`~persival.model.muscle_unit.MuscleUnit`: its state depends on its origin-insertion
+    length and its activation only), and the elbow angle solves the scalar moment balance
+    ``g(theta) = sum_m T_m dL_m/dtheta - M_ext(theta) = 0``. Every solve continues from a
+    nearby solved state (``warm_start``, default the hanging arm).
     """
 
-    base_angle_deg = 20.0  # the muscles are first brought from their mesh poses to this angle
+    start_angle_deg = 20.0  # first guess of the hanging arm
 
     def __init__(self, model_file: str | Path | None = None, profile: str = "quick", options: SolverOptions | None = None):
         self.spec, self.model_hash = load_model_file(model_file)
@@ -103,39 +107,25 @@ class ArmModel:
         self.centre = np.asarray(joint.centre, dtype=float)
         self.mesh, self.muscle_cells, self.muscle_nodes = self._build_mesh()
         self.material = self._material()
-        self.assembler = Tet10Assembler(self.mesh)
-        # Both end faces of every muscle ride on the elbow hinge as ball joints aligned with the
-        # muscle's line of action (Hinge.muscle_lines): origins at fixed points, insertions on
-        # the forearm.
-        nodes, reference, O, I, is_insertion = [], [], [], [], []
-        for m in self.spec.ordered_muscles():
-            insertion_ref = self.forearm_point(m.insertion, m.mesh_angle_deg)
-            for end in ("origin", "insertion"):
-                ids = self.mesh.node_sets[f"{m.name}/{end}"]
-                nodes.append(ids)
-                reference.append(np.full(len(ids), m.mesh_angle_deg))
-                O.append(np.tile(m.origin, (len(ids), 1)))
-                I.append(np.tile(insertion_ref, (len(ids), 1)))
-                is_insertion.append(np.full(len(ids), end == "insertion"))
-        self._tied = (np.concatenate(nodes), np.concatenate(reference))
-        self._lines = (np.vstack(O), np.vstack(I), np.concatenate(is_insertion))
-        self.elbow = Hinge(
-            "elbow", self._tied[0], self.centre, self.axis, self._tied[1], start_deg=self.base_angle_deg,
-            free=True, external_moment=self.external_moment, muscle_lines=self._lines,
-        )
-        # the free elbow: its moment balance and joint stiffness drive the staggered iteration
-        self.solver = QuasiStaticSolver(self.mesh, self.material, [self.elbow], self.options, assembler=self.assembler)
-        # the same ties with the angle prescribed (per node: each muscle may start in its own pose)
-        self._posing = Hinge(
-            "elbow", self._tied[0], self.centre, self.axis, self._tied[1], start_deg=self._tied[1],
-            end_deg=self.base_angle_deg, muscle_lines=self._lines,
-        )
-        self._posing_solver = QuasiStaticSolver(self.mesh, self.material, [self._posing], self.options, assembler=self.assembler)
+        self.units = {m.name: self._unit(m) for m in self.spec.ordered_muscles()}
         self._base: ArmState | None = None
+
+    def _unit(self, muscle: Muscle) -> MuscleUnit:
+        nodes, cells = self.muscle_nodes[muscle.name], self.muscle_cells[muscle.name]
+        mesh = Tet10Mesh(
+            self.mesh.points[nodes], self.mesh.cells[cells] - nodes[0],
+            node_sets={end: self.mesh.node_sets[f"{muscle.name}/{end}"] - nodes[0] for end in ("origin", "insertion")},
+        )
+        mf = self.material
+        material = MaterialField(mf.fibre[cells], mf.muscle_fraction[cells], mf.bulk_modulus[cells], mf.fibre_prestretch[cells], mf.parameters)
+        insertion = self.forearm_point(muscle.insertion, muscle.mesh_angle_deg)
+        return MuscleUnit(muscle.name, mesh, material, muscle.origin, insertion, self.options)
 
     def set_options(self, options: SolverOptions) -> None:
         """Solver options of every solve of this model (retries use smaller load steps)."""
-        self.options = self.solver.options = self._posing_solver.options = options
+        self.options = options
+        for unit in self.units.values():
+            unit.options = options
 
     # -- geometry -----------------------------------------------------------------------------
     def forearm_point(self, p: np.ndarray, theta_deg: float) -> np.ndarray:
@@ -150,7 +140,17 @@ class ArmModel:
             raise ValueError(f"muscle {muscle.name!r}: consecutive centre-line points coincide")
         cum = np.concatenate([[0.0], np.cumsum(seg)])
         s = np.linspace(0.0, cum[-1], stations)
-        return np.column_stack([np.interp(s, cum, knots[:, k]) for k in range(3)])
+        line = np.column_stack([np.interp(s, cum, knots[:, k]) for k in range(3)])
+        if muscle.bow > 0:
+            # bowed away from the hinge in the plane normal to its axis: a slack muscle then
+            # shortens by bending further, smoothly, instead of buckling at a bifurcation
+            chord = knots[-1] - knots[0]
+            normal = np.cross(self.axis, chord)
+            normal /= np.linalg.norm(normal)
+            if normal @ (0.5 * (knots[0] + knots[-1]) - self.centre) < 0:
+                normal = -normal
+            line += muscle.bow * np.sin(np.pi * s / cum[-1])[:, None] * normal
+        return line
 
     def centre_line_length(self, muscle: Muscle) -> float:
         """Length (mm) of the muscle's centre line in its mesh pose: the scale of its tissue layout."""
@@ -240,104 +240,72 @@ class ArmModel:
         return a
 
     def base_state(self) -> ArmState:
-        """The hanging arm (all activations 0), solved once per model and cached on disk.
-
-        The muscles are first brought from their own mesh poses to ``base_angle_deg`` with the
-        angle prescribed (minutes), then the joint is released. The result is kept in
-        ``$PERSIVAL_CACHE`` (default ``~/.cache/persival``) under a key of the model file,
-        the profile, the package version and the mesh itself; a cached state is re-checked by
-        one joint evaluation before it is used.
-        """
+        """The hanging arm (all activations 0): every muscle continued from its mesh pose."""
         if self._base is None:
             t0 = time.perf_counter()
-            cached = self._base_cache_file()
-            start = None
-            if cached.exists():
-                try:
-                    with np.load(cached, allow_pickle=False) as z:
-                        start = (z["displacement"], float(z["elbow_angle_deg"]), {})
-                except (OSError, KeyError, ValueError):
-                    start = None  # unreadable: solve again
-            if start is None or start[0].shape != self.mesh.points.shape:
-                self._posing.start_deg[:] = self._tied[1]
-                self._posing.end_deg[:] = self.base_angle_deg
-                posed = self._posing_solver.solve(0.0)
-                start = (posed.displacement, self.base_angle_deg, {"posing": posed.statistics.as_dict()})
-            state = self._equilibrium(np.zeros(5), start[0], start[1], np.zeros(5))
-            state.statistics.update(start[2])
+            rest = {name: unit.rest_state() for name, unit in self.units.items()}
+            state = self._equilibrium(np.zeros(5), rest, self.start_angle_deg)
             state.wall_time_s = time.perf_counter() - t0
-            self._write_base_cache(cached, state)
             self._base = state
         return self._base
-
-    def _base_cache_file(self) -> Path:
-        import hashlib
-        import os
-
-        from persival import __version__
-
-        digest = hashlib.sha256()
-        digest.update(f"{self.model_hash}/{self.profile}/{__version__}".encode())
-        digest.update(self.mesh.points.tobytes())
-        digest.update(self.mesh.cells.tobytes())
-        root = Path(os.environ.get("PERSIVAL_CACHE", Path.home() / ".cache" / "persival"))
-        return root / f"hanging-arm-{digest.hexdigest()[:24]}.npz"
-
-    @staticmethod
-    def _write_base_cache(path: Path, state: ArmState) -> None:
-        import os
-        import tempfile
-
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
-            with os.fdopen(fd, "wb") as handle:
-                np.savez(handle, displacement=state.displacement, elbow_angle_deg=state.elbow_angle_deg)
-            os.replace(tmp, path)
-        except OSError:
-            pass  # a read-only home only costs the next run the posing
 
     def solve(self, activations, warm_start: ArmState | None = None) -> ArmState:
         """Equilibrium for the five activations, continued from ``warm_start`` (or the hanging arm)."""
         target = self.validate_activations(activations)
         t0 = time.perf_counter()
         start = warm_start if warm_start is not None else self.base_state()
-        state = self._equilibrium(target, start.displacement, start.elbow_angle_deg, start.activations)
+        state = self._equilibrium(target, start.muscle_states, start.elbow_angle_deg)
         state.wall_time_s = time.perf_counter() - t0
         return state
 
-    # -- the joint equilibrium (staggered) --------------------------------------------------------
-    def _muscles_at(self, theta, u_start, theta_start, activation, activation_start, stats):
-        """Muscle equilibrium with the elbow angle prescribed (moving theta_start -> theta and
-        the activation along), and the joint's moment residual g and stiffness dg/dtheta there."""
-        self._posing.start_deg[:] = theta_start
-        self._posing.end_deg[:] = theta
-        solution = self._posing_solver.solve(
-            self.cell_activation(activation), initial_displacement=u_start,
-            initial_activation=self.cell_activation(activation_start),
-        )
-        for key, value in solution.statistics.as_dict().items():
-            if isinstance(value, (int, float)):
-                stats[key] = stats.get(key, 0) + value
-        # g = dPi/dtheta; dg/dtheta is the joint stiffness with the muscles re-equilibrated
-        g, dg = self.solver.hinge_balance(solution.displacement, theta, self.cell_activation(activation))
-        return solution, g, dg
+    # -- the joint equilibrium ----------------------------------------------------------------------
+    def muscle_length(self, muscle: Muscle, theta_deg: float) -> tuple[float, float, float]:
+        """Origin-insertion length L (mm) and its derivatives dL/dtheta, d2L/dtheta2 (per radian).
 
-    def _equilibrium(self, target, displacement, angle, start_activations) -> ArmState:
-        """Solve dPi/dtheta = 0 by a safeguarded 1-D Newton iteration on theta, the muscles
-        re-equilibrated at every trial angle (an equivalent of the bordered system, SPEC 3.3).
+        The insertion turns about the hinge: I' = k x (I - c), I'' = k x I'.
+        """
+        origin = np.asarray(muscle.origin, dtype=float)
+        insertion = self.forearm_point(muscle.insertion, theta_deg)
+        v1 = np.cross(self.axis, insertion - self.centre)
+        v2 = np.cross(self.axis, v1)
+        chord = insertion - origin
+        L = float(np.linalg.norm(chord))
+        e = chord / L
+        dL = float(e @ v1)
+        return L, dL, float((v1 @ v1 - dL**2) / L + e @ v2)
 
-        Why not the monolithic bordered Newton of QuasiStaticSolver: the muscles swing with the
-        joint, so the linearized step moves their interiors along tangents while their end faces
-        move on arcs; the second-order mismatch in the stiff tendons (about 100 N for 0.8 deg)
-        swamps the small moment imbalance and the line search refuses every step. Prescribing
-        the angle lets the solver place the faces exactly.
+    def moment_balance(self, theta_deg: float, activations, start: dict[str, MuscleState], statistics: dict | None = None):
+        """The joint's moment residual g = dPi/dtheta (N mm) at a prescribed angle, the joint
+        stiffness dg/dtheta (N mm/rad, the muscles re-equilibrated) and the muscle states.
+
+        g = sum_m T_m L_m' - M_ext: a muscle's work on the joint is its tension times its
+        length change (module muscle_unit); g < 0 turns the forearm towards flexion.
+        """
+        states, g, dg = {}, 0.0, 0.0
+        for muscle, a in zip(self.spec.ordered_muscles(), activations):
+            L, dL, d2L = self.muscle_length(muscle, theta_deg)
+            state = self.units[muscle.name].solve(L, float(a), start[muscle.name])
+            states[muscle.name] = state
+            g += state.tension * dL
+            dg += state.stiffness * dL**2 + state.tension * d2L
+            if statistics is not None:
+                statistics["iterations"] = statistics.get("iterations", 0) + state.iterations
+                statistics["muscle_solves"] = statistics.get("muscle_solves", 0) + 1
+        M, dM = self.external_moment(np.radians(theta_deg))
+        return g - M, dg - dM, states
+
+    def _equilibrium(self, target, start: dict[str, MuscleState], angle: float) -> ArmState:
+        """Solve g(theta) = 0 by a safeguarded Newton iteration on theta (SPEC 3.3: an
+        equivalent of the bordered system). Its derivative is the Schur complement of every
+        muscle (exact, so the iteration converges quadratically); a bracket of the root and a
+        largest step keep it from jumping past a stiff joint limit, and a trial angle whose
+        muscles fail to converge is pulled back halfway.
         """
         opts = self.options
-        stats: dict = {"joint_iterations": 0}
-        theta, u = float(angle), displacement
-        solution, g, dg = self._muscles_at(theta, u, theta, target, start_activations, stats)
-        lo, hi = -np.inf, np.inf  # bracket of the root: g(lo) < 0 < g(hi) (g grows with theta when stable)
+        stats: dict = {"joint_iterations": 0, "iterations": 0}
+        theta = float(angle)
+        g, dg, states = self.moment_balance(theta, target, start, stats)
+        lo, hi = -np.inf, np.inf  # bracket: g(lo) < 0 < g(hi) (g grows with theta when stable)
         lower, upper = self.spec.joint.limits_deg
         for _ in range(60):
             if abs(g) <= opts.moment_atol:
@@ -352,34 +320,76 @@ class ArmModel:
             if not lo < trial < hi:  # Newton left the bracket: bisect
                 trial = 0.5 * (lo + hi) if np.isfinite(lo) and np.isfinite(hi) else theta + step
             trial = float(np.clip(trial, lower - 30.0, upper + 30.0))
-            solution, g, dg = self._muscles_at(trial, solution.displacement, theta, target, target, stats)
-            theta = trial
+            for _retry in range(4):
+                try:
+                    g_t, dg_t, states_t = self.moment_balance(trial, target, states, stats)
+                    break
+                except ConvergenceError:
+                    trial = 0.5 * (theta + trial)
+            else:
+                raise ConvergenceError(f"the muscles did not converge on the way from {theta:.2f} deg")
+            theta, g, dg, states = trial, g_t, dg_t, states_t
             stats["joint_iterations"] += 1
         else:
             raise ConvergenceError(f"joint equilibrium not found: moment residual {g:.3e} N mm at {theta:.2f} deg")
-        u = solution.displacement
-        f = self.assembler.internal_force(u.ravel(), self.material, self.cell_activation(target)).reshape(-1, 3)
-        # A muscle's moment on the forearm is minus the work of its tied faces' forces per
-        # unit rotation (the hinge's virtual work, both faces included).
-        velocity, _ = self.elbow.velocity(self.mesh.points, theta)
-        work = np.zeros((self.mesh.n_nodes, 3))
-        work[self.elbow.nodes] = velocity
         moments, forces = {}, {}
-        for name in MUSCLE_ORDER:
-            nodes = self.muscle_nodes[name]
-            moments[name] = float(-np.sum(f[nodes] * work[nodes]))
-            forces[name] = float(np.linalg.norm(f[self.mesh.node_sets[f"{name}/insertion"]].sum(axis=0)))
+        for muscle in self.spec.ordered_muscles():
+            _, dL, _ = self.muscle_length(muscle, theta)
+            forces[muscle.name] = states[muscle.name].tension
+            moments[muscle.name] = -states[muscle.name].tension * dL
+        stats["joint_stiffness_Nmm_per_rad"] = float(dg)
         return ArmState(
-            activations=target.copy(),
-            elbow_angle_deg=float(theta),
-            displacement=u.copy(),
+            activations=np.asarray(target, dtype=float).copy(),
+            elbow_angle_deg=theta,
+            displacement=self.displacement(states, theta),
             moment_residual=float(g),
             muscle_moments=moments,
             muscle_forces=forces,
             external_moment=self.external_moment(np.radians(theta))[0],
-            max_volume_change=solution.max_volume_change,
+            max_volume_change=max(s.max_volume_change for s in states.values()),
+            muscle_states=states,
             statistics=stats,
         )
+
+    def displacement(self, states: dict[str, MuscleState], theta_deg: float) -> np.ndarray:
+        """World-frame displacements (n_nodes, 3) of all muscles: each muscle's solution turned
+        with its line of action (module muscle_unit)."""
+        u = np.zeros_like(self.mesh.points)
+        for muscle in self.spec.ordered_muscles():
+            unit = self.units[muscle.name]
+            insertion = self.forearm_point(muscle.insertion, theta_deg)
+            direction = (insertion - unit.origin) / np.linalg.norm(insertion - unit.origin)
+            nodes = self.muscle_nodes[muscle.name]
+            u[nodes] = unit.positions(states[muscle.name], line_rotation(unit.direction, direction)) - self.mesh.points[nodes]
+        return u
+
+    def verify_equilibrium(self, state: ArmState) -> tuple[float, float]:
+        """Check a state in the monolithic formulation, independently of the muscle units:
+        every muscle's faces tied to the elbow (ball joints on the lines of action,
+        :class:`Hinge`), the whole mesh assembled at once. Returns the largest nodal force
+        residual of the free DOFs (N) and the hinge's moment residual from virtual work,
+        f . dx/dtheta - M_ext (N mm)."""
+        nodes, reference, O, I, is_insertion = [], [], [], [], []
+        for m in self.spec.ordered_muscles():
+            insertion_ref = self.forearm_point(m.insertion, m.mesh_angle_deg)
+            for end in ("origin", "insertion"):
+                ids = self.mesh.node_sets[f"{m.name}/{end}"]
+                nodes.append(ids)
+                reference.append(np.full(len(ids), m.mesh_angle_deg))
+                O.append(np.tile(m.origin, (len(ids), 1)))
+                I.append(np.tile(insertion_ref, (len(ids), 1)))
+                is_insertion.append(np.full(len(ids), end == "insertion"))
+        elbow = Hinge(
+            "elbow", np.concatenate(nodes), self.centre, self.axis, np.concatenate(reference), start_deg=state.elbow_angle_deg,
+            free=True, external_moment=self.external_moment,
+            muscle_lines=(np.vstack(O), np.vstack(I), np.concatenate(is_insertion)),
+        )
+        solver = QuasiStaticSolver(self.mesh, self.material, [elbow], self.options)
+        activation = self.cell_activation(state.activations)
+        u = state.displacement.ravel()
+        f = solver.assembler.internal_force(u, self.material, activation)
+        moment, _ = solver.hinge_balance(u, state.elbow_angle_deg, activation)
+        return float(np.abs(f[solver.free]).max()), float(moment)
 
 
 __all__ = ["ArmModel", "ArmState", "ConvergenceError", "muscle_profile", "rotation_about"]

@@ -74,6 +74,7 @@ class Muscle(_Strict):
     insertion: Vector
     via: list[Vector] = Field(default_factory=list, description="centre-line points, upper-arm frame")
     mesh_angle_deg: float = Field(description="elbow angle of the stress-free mesh pose")
+    bow: float = Field(0.0, ge=0, description="mm: sagitta of a sine bow of the centre line away from the hinge")
     belly_radius: float = Field(gt=0)
     tendon_radius: tuple[float, float] = Field(description="proximal, distal (mm)")
     tendon_length: tuple[float, float] = Field(description="proximal, distal pure tendon (mm, mesh pose)")

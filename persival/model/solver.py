@@ -208,6 +208,15 @@ class QuasiStaticSolver:
         self.linear_solver.factorize(self._free_upper(K))
         return r_theta, float(k_tt - k_ft @ self.linear_solver.solve(k_ft))
 
+    def condensed_stiffness(self, K: sp.csr_matrix, g: np.ndarray) -> float:
+        """Stiffness along a motion ``g`` of the constrained DOFs with the free DOFs
+        re-equilibrated: the Schur complement ``g.K.g - (K g)_f . K_ff^-1 (K g)_f``
+        (K: the upper-triangle tangent of :meth:`Tet10Assembler.tangent`)."""
+        Kg = symmetric_matvec(K, g)
+        self.linear_solver.factorize(self._free_upper(K))
+        k_f = Kg[self.free]
+        return float(g @ Kg - k_f @ self.linear_solver.solve(k_f))
+
     def _residual_norm(self, f, r_theta):
         norm = float(np.linalg.norm(f[self.free]))
         if self.hinge is None:

@@ -1,0 +1,133 @@
+"""One muscle-tendon unit between its origin and insertion faces, solved in its own frame.
+
+SPEC 3.3 ties each muscle's end faces to its line of action (ball joints: the origin face
+turns about the fixed origin point O, the insertion face rides on the forearm's insertion
+point I(theta), and both faces turn by the minimal rotation Q(theta) that takes the mesh-pose
+line direction d_ref to the current one d(theta); see :class:`~persival.model.constraints.Hinge`).
+Because the law is objective and the muscles carry no body force, the deformed muscle at
+elbow angle theta is exactly the rigid motion ``x = O + Q(theta) (y - O)`` of the solution
+``y`` of a simpler problem: origin face held in its mesh pose, insertion face translated along
+d_ref by ``L(theta) - L_mesh`` (L = |I - O|). A muscle's state therefore depends on two numbers,
+its origin-insertion length L and its activation a, and its work on the joint is
+``T dL/dtheta`` with the tension ``T = dPi/dL`` (the axial reaction of the insertion face).
+The rigid rotation does no work (the muscle's own moment balance), so nothing is lost.
+
+This turns the joint equilibrium into one scalar equation in theta (see ArmModel), and each
+muscle into a small FE problem solved on its own: five solves of a few thousand DOFs instead
+of one of all of them, and a table of solved (L, a) states per muscle that warm-starts every
+new state by interpolation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from persival.model.assembly import MaterialField, Tet10Assembler
+from persival.model.constraints import Dirichlet
+from persival.model.mesh import Tet10Mesh
+from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
+
+
+@dataclass
+class MuscleState:
+    """Equilibrium of one muscle at origin-insertion length ``length`` and activation ``activation``."""
+
+    length: float  # mm, |I - O|
+    activation: float
+    displacement: np.ndarray  # (n_nodes, 3) mm, in the muscle's mesh-pose frame
+    tension: float  # N, dPi/dL: positive when the muscle pulls its ends together
+    stiffness: float  # N/mm, dT/dL with the interior re-equilibrated (Schur complement)
+    max_volume_change: float
+    iterations: int = 0
+
+
+def line_rotation(d_ref: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """The minimal rotation taking unit vector d_ref to unit vector d (the Hinge's face rotation).
+
+    Q = I + [v]x + [v]x^2 / (1 + cos), v = d_ref x d.
+    """
+    v = np.cross(d_ref, d)
+    c = float(d_ref @ d)
+    if c <= -1.0 + 1e-12:
+        raise ValueError("the line of action reversed its direction")
+    V = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    return np.eye(3) + V + V @ V / (1.0 + c)
+
+
+class MuscleUnit:
+    """The FE problem of one muscle with its length and activation prescribed."""
+
+    def __init__(
+        self,
+        name: str,
+        mesh: Tet10Mesh,
+        material: MaterialField,
+        origin: np.ndarray,
+        insertion: np.ndarray,
+        options: SolverOptions | None = None,
+    ) -> None:
+        self.name = name
+        self.mesh = mesh
+        self.material = material
+        self.origin = np.asarray(origin, dtype=float)
+        axis = np.asarray(insertion, dtype=float) - self.origin
+        self.mesh_length = float(np.linalg.norm(axis))
+        if self.mesh_length <= 0:
+            raise ValueError(f"muscle {name!r}: origin and insertion coincide")
+        self.direction = axis / self.mesh_length
+        self.assembler = Tet10Assembler(mesh)
+        self._origin_face = Dirichlet("origin", mesh.node_sets["origin"])
+        self._insertion_face = Dirichlet("insertion", mesh.node_sets["insertion"])
+        self.solver = QuasiStaticSolver(mesh, material, [self._origin_face, self._insertion_face], options, assembler=self.assembler)
+        # the insertion face's unit axial translation: dx/dL of the constrained DOFs
+        self._axial = np.zeros(self.assembler.n_dofs)
+        self._axial[self._insertion_face.dofs] = np.tile(self.direction, len(self._insertion_face.nodes))
+
+    @property
+    def options(self) -> SolverOptions:
+        return self.solver.options
+
+    @options.setter
+    def options(self, value: SolverOptions) -> None:
+        self.solver.options = value
+
+    def rest_state(self) -> MuscleState:
+        """The stress-free mesh pose (length = mesh length, activation 0)."""
+        u = np.zeros((self.mesh.n_nodes, 3))
+        return MuscleState(self.mesh_length, 0.0, u, 0.0, self._stiffness(u, 0.0)[1], 0.0)
+
+    def solve(self, length: float, activation: float, start: MuscleState | None = None) -> MuscleState:
+        """Equilibrium at (length, activation), continued from ``start`` (default: the mesh pose).
+
+        The insertion face moves from the start length to ``length`` while the activation
+        moves along: the solver's load stepping is the continuation.
+        """
+        if not np.isfinite(length) or length <= 0:
+            raise ValueError(f"muscle {self.name!r}: length must be positive, got {length}")
+        start = start or self.rest_state()
+        self._insertion_face.start[:] = (start.length - self.mesh_length) * self.direction
+        self._insertion_face.end[:] = (length - self.mesh_length) * self.direction
+        solution = self.solver.solve(
+            float(activation), initial_displacement=start.displacement, initial_activation=float(start.activation)
+        )
+        tension, stiffness = self._stiffness(solution.displacement, float(activation))
+        return MuscleState(
+            float(length), float(activation), solution.displacement, tension, stiffness,
+            solution.max_volume_change, solution.statistics.iterations,
+        )
+
+    def _stiffness(self, displacement: np.ndarray, activation: float) -> tuple[float, float]:
+        """Tension dPi/dL and axial stiffness dT/dL = g.K.g - (K g)_f . K_ff^-1 (K g)_f."""
+        per_cell = np.full(self.mesh.n_cells, activation)
+        K, f = self.assembler.tangent(np.asarray(displacement).ravel(), self.material, per_cell)
+        return float(self._axial @ f), self.solver.condensed_stiffness(K, self._axial)
+
+    def positions(self, state: MuscleState, rotation: np.ndarray) -> np.ndarray:
+        """World node positions of a state whose line of action is turned by ``rotation``."""
+        y = self.mesh.points + state.displacement
+        return self.origin + (y - self.origin) @ rotation.T
+
+
+__all__ = ["ConvergenceError", "MuscleState", "MuscleUnit", "line_rotation"]
