@@ -1,7 +1,7 @@
 """`persival run`: the end-to-end job over the stages that exist, each reading the last one's artifact.
 
 1. model     - validate and mesh the built-in arm (quick profile): reference VTU + geometry.json
-2. FE check  - the paper-size verification spindle (SPEC 3.2) activated at three levels: fe.json + VTU
+2. FE        - three equilibria of the arm (hanging, biceps 0.5, flexors 1): arm.json, arm/<state>/, arm.png
 3. campaign  - a level-1 sparse-grid campaign (243 states) into a zarr store, with the fast analytic
                simulator until the arm's calibration lands (see README: status)
 4. surrogate - B-spline sparse grid fitted to the store (biceps surface + elbow angle), checked on
@@ -50,29 +50,39 @@ def model_stage(out: Path, profile: str = "quick") -> dict:
     return geometry
 
 
-def fe_stage(out: Path, activations=(0.25, 0.5, 1.0)) -> dict:
-    from persival.model.constraints import Dirichlet
-    from persival.model.geometry import spindle, spindle_material
-    from persival.model.solver import QuasiStaticSolver
+ARM_STATES = {
+    "hanging": (0.0, 0.0, 0.0, 0.0, 0.0),
+    "biceps_half": (0.5, 0.0, 0.0, 0.0, 0.0),
+    "flexors_full": (1.0, 1.0, 1.0, 0.0, 0.0),
+}
 
-    mesh = spindle(length=300.0, belly_radius=20.0, tendon_radius=5.0, mesh_size=6.3)
-    solver = QuasiStaticSolver(
-        mesh, spindle_material(mesh),
-        [Dirichlet("origin", mesh.node_sets["origin"]), Dirichlet("insertion", mesh.node_sets["insertion"])],
-    )
-    rows, u, previous = [], None, 0.0
-    for a in activations:
-        solution = solver.solve(a, initial_displacement=u, initial_activation=previous)
-        u, previous = solution.displacement, a
-        rows.append({
-            "activation": a,
-            "isometric_force_N": float(abs(solution.reactions["insertion"].force[2])),
-            "max_abs_J_minus_1": solution.max_volume_change,
-            **{k: v for k, v in solution.statistics.as_dict().items() if k in ("load_steps", "iterations", "wall_time_s")},
-        })
-        mesh.write_vtu(out / f"spindle_alpha{a:.2f}.vtu", displacement=solution.displacement)
-    result = {"dofs": 3 * mesh.n_nodes, "tet10": mesh.n_cells, "states": rows}
-    _write_json(out / "fe.json", result)
+
+def arm_stage(out: Path, profile: str = "quick", console=None) -> dict:
+    """Three FE states of the arm, each warm-started from the last: state.json + VTU per state,
+    and a picture of the three (``arm.png``)."""
+    from persival.evaluate.render import render_states
+    from persival.model.arm import ArmModel
+    from persival.model.output import write_state
+
+    arm = ArmModel(profile=profile)
+    rows, state, directories = {}, None, []
+    for name, activations in ARM_STATES.items():
+        state = arm.solve(activations, warm_start=state)
+        directories.append(write_state(arm, state, out / "arm" / name))
+        rows[name] = {
+            "activations": list(activations),
+            "elbow_angle_deg": state.elbow_angle_deg,
+            "moment_residual_Nmm": state.moment_residual,
+            "newton_iterations": state.statistics["iterations"],
+            "wall_time_s": state.wall_time_s,
+            "max_abs_J_minus_1": state.max_volume_change,
+        }
+        if console is not None:
+            console.print(f"  {name:13s} elbow {state.elbow_angle_deg:6.2f} deg, moment residual {state.moment_residual:.1e} N mm, "
+                          f"{state.statistics['iterations']} Newton iterations, {state.wall_time_s:.1f} s, max|J-1| {state.max_volume_change:.1e}")
+    render_states(directories, out / "arm.png")
+    result = {"profile": profile, "states": rows}
+    _write_json(out / "arm.json", result)
     return result
 
 
@@ -128,11 +138,8 @@ def run(out: Path, profile: str = "quick") -> dict:
     geometry = model_stage(out, profile)
     for name, g in geometry["muscles"].items():
         console.print(f"  {name:16s} {g['tet10']:5d} tet10, {g['surface_nodes']:5d} surface nodes, moment arm at 90 deg {g['line_moment_arm_mm']['90']:+.1f} mm")
-    console.rule("2/4 FE: activated verification spindle (both ends fixed)")
-    fe = fe_stage(out)
-    for row in fe["states"]:
-        console.print(f"  alpha {row['activation']:.2f}: isometric force {row['isometric_force_N']:.1f} N, "
-                      f"{row['iterations']} Newton iterations, {row['wall_time_s']:.1f} s, max|J-1| {row['max_abs_J_minus_1']:.1e}")
+    console.rule("2/4 FE: the arm hanging, biceps at 0.5, all flexors at 1 (joint equilibrium)")
+    fe = arm_stage(out, profile, console)
     console.rule("3/4 campaign: level-1 sparse grid (analytic simulator)")
     store = campaign_stage(out)
     console.rule("4/4 surrogate: B-spline sparse grid on the store")
@@ -141,7 +148,7 @@ def run(out: Path, profile: str = "quick") -> dict:
                   f"{report['predict_ms_per_state_batch1_float32']:.3f} ms per state")
     console.rule("results")
     console.print(f"  {out}/geometry.json, mesh_*.vtu, bone_*.vtu   (open the VTU files in ParaView)")
-    console.print(f"  {out}/fe.json, spindle_alpha*.vtu")
+    console.print(f"  {out}/arm.json, {out}/arm/<state>/state.json + VTU, picture {out}/arm.png")
     console.print(f"  {out}/campaign.zarr   (persival campaign status --store {out}/campaign.zarr)")
     console.print(f"  {out}/surrogate.json, {out}/sg_biceps/ (persival.surrogate.surface_surrogate.SurfaceSurrogate.load)")
     console.print("  viewer: not built yet (see README status)")

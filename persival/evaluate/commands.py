@@ -2,11 +2,31 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import typer
 
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     """Attach this stage's commands to the main app and the benchmark group."""
+
+    @app.command()
+    def render(
+        states: list[Path] = typer.Argument(..., help="State directories written by `persival simulate`."),
+        out: Path = typer.Option(Path("results/arm.png"), "--out", help="PNG file to write."),
+    ) -> None:
+        """Render solved arm states side by side (off-screen pyvista), coloured by displacement."""
+        from rich.console import Console
+
+        from persival.evaluate.render import render_states
+
+        console = Console()
+        try:
+            path = render_states(states, out)
+        except (FileNotFoundError, ValueError) as exc:
+            console.print(f"[red]error:[/red] {exc}")
+            raise typer.Exit(2) from None
+        console.print(f"wrote {path}")
 
     @bench_app.command("fe")
     def bench_fe(

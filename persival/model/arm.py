@@ -37,21 +37,25 @@ def muscle_profile(muscle: Muscle, s: np.ndarray, length: float) -> tuple[np.nda
     """Radius and muscle fraction gamma_M along the normalized centre-line position s.
 
     Pure tendon over the tendon lengths, a linear muscle-tendon blend over
-    ``transition_length`` (SPEC 3.1 mixture), a full belly between the tendons:
-    r = r_t + (r_b - r_t) sin(pi x)^(1/2). A slimmer (sin^2) taper would put pure muscle of a
-    tenth of the belly's cross-section in series with the belly; under tension those necks
-    take the whole stretch and reach the steep passive range (c4 = 42.6) long before the belly.
+    ``transition_length`` (SPEC 3.1 mixture), then the belly. The radius rises from the
+    tendon's to 90 % of the belly's over 1.5 transition lengths (smoothstep) and bulges to the
+    full belly radius at the middle. Why so blunt: the muscle's sections are in series, so the
+    thinnest pure-muscle section bounds the force the whole unit can pull (0.3 MPa times its
+    area); a fusiform taper (sin(pi x)^(1/2) or ^(1/3)) left about 40 % of the belly's area
+    there, and a full biceps stalled at 72 N, 108 deg.
     """
     s_a = muscle.tendon_length[0] / length
     s_b = 1.0 - muscle.tendon_length[1] / length
-    if s_b - s_a <= 2.0 * muscle.transition_length / length:
+    if s_b - s_a <= 3.0 * muscle.transition_length / length:
         raise ValueError(f"muscle {muscle.name!r}: tendons and transitions are longer than the muscle ({length:.0f} mm)")
     r_tendon = muscle.tendon_radius[0] + (muscle.tendon_radius[1] - muscle.tendon_radius[0]) * s
-    inside = (s > s_a) & (s < s_b)
-    bump = np.where(inside, np.sqrt(np.abs(np.sin(np.pi * (s - s_a) / (s_b - s_a)))), 0.0)
-    radius = r_tendon + (muscle.belly_radius - r_tendon) * bump
     ramp = muscle.transition_length / length
-    gamma = np.clip(np.minimum(s - s_a, s_b - s) / ramp, 0.0, 1.0)
+    depth = np.clip(np.minimum(s - s_a, s_b - s), 0.0, None)  # distance into the belly
+    z = np.clip(depth / (1.5 * ramp), 0.0, 1.0)
+    bulge = np.sin(np.pi * np.clip((s - s_a) / (s_b - s_a), 0.0, 1.0))
+    shape = (3.0 * z**2 - 2.0 * z**3) * (0.9 + 0.1 * bulge)
+    radius = r_tendon + (muscle.belly_radius - r_tendon) * shape
+    gamma = np.clip(depth / ramp, 0.0, 1.0)
     return radius, gamma
 
 
@@ -101,7 +105,9 @@ class ArmModel:
         self.spec, self.model_hash = load_model_file(model_file)
         self.profile = profile
         self.spec.profile(profile)  # unknown profile -> clear error
-        self.options = options or SolverOptions()
+        # atol: 1e-6 N on nodal forces of muscles pulling 10-400 N keeps the moment residual
+        # below 1e-4 N mm; a tighter floor sits at round-off in nearly unloaded states
+        self.options = options or SolverOptions(atol=1e-6)
         joint = self.spec.joint
         self.axis = np.asarray(joint.axis, dtype=float) / np.linalg.norm(joint.axis)
         self.centre = np.asarray(joint.centre, dtype=float)
@@ -324,10 +330,11 @@ class ArmModel:
                 try:
                     g_t, dg_t, states_t = self.moment_balance(trial, target, states, stats)
                     break
-                except ConvergenceError:
+                except ConvergenceError as exc:
+                    failure = exc
                     trial = 0.5 * (theta + trial)
             else:
-                raise ConvergenceError(f"the muscles did not converge on the way from {theta:.2f} deg")
+                raise ConvergenceError(f"the muscles did not converge on the way from {theta:.2f} deg: {failure}")
             theta, g, dg, states = trial, g_t, dg_t, states_t
             stats["joint_iterations"] += 1
         else:

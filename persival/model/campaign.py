@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from persival.campaign.simulator import ReferenceGeometry, SimulationResult, SurfaceTopology
@@ -9,7 +11,6 @@ from persival.model.arm import ArmModel, ArmState
 from persival.model.arm_file import MUSCLE_ORDER
 from persival.model.mesh import Tet10Mesh
 from persival.model.output import muscle_submesh
-from persival.model.solver import SolverOptions
 
 
 def display_triangles(faces6: np.ndarray) -> np.ndarray:
@@ -38,6 +39,7 @@ class ArmSimulator:
 
     def __init__(self, model_file: str | None = None, profile: str = "quick") -> None:
         self.arm = ArmModel(model_file, profile)
+        self.default_options = self.arm.options
         self.surfaces = {name: muscle_surface(self.arm, name) for name in MUSCLE_ORDER}
 
     def reference(self) -> ReferenceGeometry:
@@ -52,7 +54,7 @@ class ArmSimulator:
 
     def simulate(self, activations, warm_start: ArmState | None = None, attempt: int = 0):
         # retries: smaller first load steps
-        self.arm.set_options(SolverOptions(initial_step=0.25 / 2**attempt))
+        self.arm.set_options(replace(self.default_options, initial_step=self.default_options.initial_step / 2**attempt))
         state = self.arm.solve(activations, warm_start=warm_start)
         x = self.arm.mesh.points + state.displacement
         result = SimulationResult(

@@ -20,7 +20,7 @@ new state by interpolation.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -94,9 +94,30 @@ class MuscleUnit:
         self.solver.options = value
 
     def rest_state(self) -> MuscleState:
-        """The stress-free mesh pose (length = mesh length, activation 0)."""
-        u = np.zeros((self.mesh.n_nodes, 3))
-        return MuscleState(self.mesh_length, 0.0, u, 0.0, self._stiffness(u, 0.0)[1], 0.0)
+        """The passive equilibrium at the mesh length (activation 0), solved once.
+
+        With a fibre prestretch lambda_0 > 1 the mesh pose carries a small passive fibre
+        stress (SPEC 3.3) and is not yet in equilibrium. Newton from the mesh pose can fail
+        on it (the passive law's c4 = 42.6 makes the tangent far stiffer than the stress
+        suggests), so the prestretch is switched on by continuation, 1 -> lambda_0.
+        """
+        if getattr(self, "_rest", None) is None:
+            u = np.zeros((self.mesh.n_nodes, 3))
+            full = self.material
+            try:
+                for share in (0.6, 0.8, 0.9, 0.95, 0.98, 1.0):
+                    self.solver.material = replace(full, fibre_prestretch=1.0 + share * (full.fibre_prestretch - 1.0))
+                    self._insertion_face.start[:] = 0.0
+                    self._insertion_face.end[:] = 0.0
+                    u = self.solver.solve(0.0, initial_displacement=u).displacement
+            except ConvergenceError as exc:
+                raise ConvergenceError(f"muscle {self.name!r}: the prestressed mesh pose has no equilibrium: {exc}") from exc
+            finally:
+                self.solver.material = full
+            F = self.assembler.deformation_gradient(u.ravel())
+            tension, stiffness = self._stiffness(u, 0.0)
+            self._rest = MuscleState(self.mesh_length, 0.0, u, tension, stiffness, float(np.abs(np.linalg.det(F) - 1).max()))
+        return self._rest
 
     def solve(self, length: float, activation: float, start: MuscleState | None = None) -> MuscleState:
         """Equilibrium at (length, activation), continued from ``start`` (default: the mesh pose).
@@ -109,9 +130,15 @@ class MuscleUnit:
         start = start or self.rest_state()
         self._insertion_face.start[:] = (start.length - self.mesh_length) * self.direction
         self._insertion_face.end[:] = (length - self.mesh_length) * self.direction
-        solution = self.solver.solve(
-            float(activation), initial_displacement=start.displacement, initial_activation=float(start.activation)
-        )
+        try:
+            solution = self.solver.solve(
+                float(activation), initial_displacement=start.displacement, initial_activation=float(start.activation)
+            )
+        except ConvergenceError as exc:
+            raise ConvergenceError(
+                f"muscle {self.name!r} from length {start.length:.1f} mm, activation {start.activation:.2f} "
+                f"to {length:.1f} mm, {activation:.2f}: {exc}"
+            ) from exc
         tension, stiffness = self._stiffness(solution.displacement, float(activation))
         return MuscleState(
             float(length), float(activation), solution.displacement, tension, stiffness,

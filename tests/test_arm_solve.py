@@ -1,0 +1,118 @@
+"""The built-in arm's equilibria (coarse profile, real FE solves): SPEC 3.3 physics.
+
+One module-scoped chain of warm-started states keeps the suite fast: the hanging arm, the
+biceps at 0.5 and 1, then triceps added.
+"""
+
+import json
+
+import numpy as np
+import pytest
+
+from persival.model.arm import ArmModel
+from persival.model.solver import ConvergenceError
+
+
+@pytest.fixture(scope="module")
+def arm():
+    return ArmModel(profile="coarse")
+
+
+@pytest.fixture(scope="module")
+def states(arm):
+    hanging = arm.base_state()
+    half = arm.solve([0.5, 0, 0, 0, 0], warm_start=hanging)
+    full = arm.solve([1.0, 0, 0, 0, 0], warm_start=half)
+    against = arm.solve([1.0, 0, 0, 0.5, 0], warm_start=full)
+    return hanging, half, full, against
+
+
+def test_hanging_arm_is_near_extension_and_balanced(arm, states):
+    hanging = states[0]
+    assert 0.0 < hanging.elbow_angle_deg < 40.0
+    assert abs(hanging.moment_residual) <= arm.options.moment_atol
+    # moments add up: muscles + gravity + passive joint
+    assert sum(hanging.muscle_moments.values()) + hanging.external_moment == pytest.approx(0.0, abs=1e-3)
+
+
+def test_biceps_flexes_monotonically_and_triceps_extends(states):
+    hanging, half, full, against = states
+    assert hanging.elbow_angle_deg + 20.0 < half.elbow_angle_deg < full.elbow_angle_deg
+    assert against.elbow_angle_deg < full.elbow_angle_deg - 3.0
+    assert full.muscle_forces["biceps"] > half.muscle_forces["biceps"] > hanging.muscle_forces["biceps"]
+    for state in states:
+        assert state.max_volume_change < 0.02  # nearly incompressible (SPEC 3.1)
+
+
+def test_monolithic_formulation_agrees(arm, states):
+    """The muscle-unit decomposition is exact: in the whole-mesh formulation with every face
+    tied to the elbow (Hinge ball joints) the same state is in equilibrium."""
+    for state in (states[0], states[2]):
+        force, moment = arm.verify_equilibrium(state)
+        assert force < 1e-5  # N, largest nodal residual of the free DOFs
+        assert abs(moment) < 1e-3  # N mm, hinge virtual work minus gravity and joint
+
+
+def test_virtual_work_of_a_small_rotation_restores(arm, states):
+    """Independent check: prescribe theta* +- 0.5 deg and re-equilibrate the muscles; the net
+    moment residual changes sign (restoring) and matches the joint stiffness."""
+    state = states[1]
+    theta = state.elbow_angle_deg
+    g_minus, _, _ = arm.moment_balance(theta - 0.5, state.activations, state.muscle_states)
+    g_plus, _, _ = arm.moment_balance(theta + 0.5, state.activations, state.muscle_states)
+    assert g_minus < 0.0 < g_plus
+    slope = (g_plus - g_minus) / np.radians(1.0)
+    assert slope == pytest.approx(state.statistics["joint_stiffness_Nmm_per_rad"], rel=0.05)
+
+
+def test_biceps_belly_thickens_as_it_shortens(arm, states):
+    hanging, _, full, _ = states
+    unit = arm.units["biceps"]
+    axis = unit.direction  # in the muscle's own frame the bow is symmetric: mid tangent = chord
+    s = ((unit.mesh.points - unit.origin) @ axis) / unit.mesh_length
+    middle = np.abs(s - 0.5) < 0.03
+
+    def belly_radius(state):
+        y = unit.mesh.points[middle] + state.muscle_states["biceps"].displacement[middle]
+        r = y - y.mean(axis=0)
+        r -= np.outer(r @ axis, axis)
+        return np.linalg.norm(r, axis=1).max()
+
+    shortening = hanging.muscle_states["biceps"].length - full.muscle_states["biceps"].length
+    assert shortening > 20.0
+    assert belly_radius(full) > 1.03 * belly_radius(hanging)
+
+
+def test_non_convergence_is_a_clear_error_and_writes_nothing(arm, states, tmp_path, monkeypatch):
+    from dataclasses import replace
+
+    default = arm.options
+    arm.set_options(replace(default, max_iterations=1, min_step=0.5))
+    try:
+        with pytest.raises(ConvergenceError, match="muscle"):
+            arm.solve([0.0, 0.0, 1.0, 0.0, 0.0], warm_start=states[0])
+    finally:
+        arm.set_options(default)
+    assert not list(tmp_path.iterdir())
+
+
+def test_state_files_and_render(arm, states, tmp_path):
+    pytest.importorskip("pyvista")
+    from persival.evaluate.render import render_states
+    from persival.model.output import write_state
+
+    dirs = [write_state(arm, s, tmp_path / f"state{k}") for k, s in enumerate(states[:3])]
+    summary = json.loads((dirs[2] / "state.json").read_text())
+    assert summary["elbow_angle_deg"] == pytest.approx(states[2].elbow_angle_deg)
+    assert abs(summary["moment_residual_Nmm"]) <= 1e-4
+    png = render_states(dirs, tmp_path / "arm.png", window=(200, 260))
+    from PIL import Image
+
+    image = np.asarray(Image.open(png).convert("RGB")).astype(float)
+    assert image.shape[:2] == (260, 600)
+    # not blank: coloured muscles on a white background in every panel
+    for k in range(3):
+        panel = image[:, 200 * k : 200 * (k + 1)]
+        assert (panel.std(axis=2) > 30).mean() > 0.01
+    with pytest.raises(FileNotFoundError, match="state.json"):
+        render_states([tmp_path], tmp_path / "x.png")
