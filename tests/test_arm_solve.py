@@ -116,3 +116,16 @@ def test_state_files_and_render(arm, states, tmp_path):
         assert (panel.std(axis=2) > 30).mean() > 0.01
     with pytest.raises(FileNotFoundError, match="state.json"):
         render_states([tmp_path], tmp_path / "x.png")
+
+
+def test_moment_curves_predict_the_hanging_arm(arm, states):
+    """The calibration tool (persival curves): per-muscle sweeps summed with gravity and the
+    joint bracket the FE hanging angle; a muscle at its mesh length pulls (almost) nothing."""
+    from persival.evaluate.muscle_curves import muscle_curves, predicted_equilibrium
+
+    theta = states[0].elbow_angle_deg
+    angles = np.array([np.floor(theta), np.floor(theta) + 1.0, 60.0])
+    curves = muscle_curves(arm, angles)
+    assert predicted_equilibrium(curves, (0, 0, 0, 0, 0)) == pytest.approx(theta, abs=0.05)
+    assert abs(curves["biceps"]["passive_tension_N"][2]) < 2.0  # biceps meshed at 60 deg
+    assert np.all(curves["biceps"]["active_moment_Nmm"] > 5 * curves["biceps"]["passive_moment_Nmm"])

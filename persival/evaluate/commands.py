@@ -28,6 +28,46 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             raise typer.Exit(2) from None
         console.print(f"wrote {path}")
 
+    @app.command()
+    def curves(
+        model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+        profile: str = typer.Option("quick", "--profile", help="Mesh profile: coarse, quick or paper."),
+        out: Path = typer.Option(Path("results/curves"), "--out", help="Output directory (curves.json, curves.png)."),
+    ) -> None:
+        """Every muscle's passive and active moment against the elbow angle, and the equilibria they predict."""
+        import json
+
+        import numpy as np
+        from rich.console import Console
+        from rich.progress import Progress
+        from rich.table import Table
+
+        from persival.evaluate.muscle_curves import REPORTED_SETS, muscle_curves, plot_curves, predicted_equilibrium
+        from persival.model.arm import ArmModel
+        from persival.model.arm_file import ModelFileError
+
+        console = Console()
+        try:
+            arm = ArmModel(model, profile)
+        except (ModelFileError, ValueError) as exc:
+            console.print(f"[red]error:[/red] {exc}")
+            raise typer.Exit(2) from None
+        with Progress(console=console) as bar:
+            task = bar.add_task("muscle sweeps", total=10)
+            data = muscle_curves(arm, progress=lambda name, a: bar.update(task, advance=1, description=f"{name} at activation {a:g}"))
+        table = Table(title="equilibria predicted by the curves (persival simulate solves them exactly)")
+        table.add_column("activations")
+        table.add_column("elbow angle (deg)", justify="right")
+        predicted = {}
+        for label, acts in REPORTED_SETS.items():
+            predicted[label] = predicted_equilibrium(data, acts)
+            table.add_row(label, f"{predicted[label]:.1f}")
+        console.print(table)
+        out.mkdir(parents=True, exist_ok=True)
+        serial = {k: (v.tolist() if isinstance(v, np.ndarray) else {kk: vv.tolist() for kk, vv in v.items()}) for k, v in data.items()}
+        (out / "curves.json").write_text(json.dumps({"profile": profile, "curves": serial, "predicted_deg": predicted}, indent=1))
+        console.print(f"wrote {out / 'curves.json'} and {plot_curves(data, out / 'curves.png')}")
+
     @bench_app.command("fe")
     def bench_fe(
         mesh_size: float = typer.Option(6.3, help="Element size of the 40 x 300 mm spindle (mm)."),
