@@ -38,6 +38,9 @@ def render_states(directories: list[str | Path], out: str | Path, window: tuple[
         muscles = [pv.read(d / f"{name}.vtu").extract_surface(algorithm="dataset_surface") for name in MUSCLES]
         bones = [pv.read(p) for p in sorted(d.glob("bone_*.vtu"))]
         meshes.append((muscles, bones))
+    everything = [m.points for muscles, bones in meshes for m in (*muscles, *bones)]
+    lo = np.min([p.min(axis=0) for p in everything], axis=0)
+    hi = np.max([p.max(axis=0) for p in everything], axis=0)
     top = max(float(np.max(m["displacement_magnitude"])) for muscles, _ in meshes for m in muscles)
     plotter = pv.Plotter(off_screen=True, shape=(1, len(directories)), window_size=(window[0] * len(directories), window[1]), border=False)
     for k, ((muscles, bones), summary) in enumerate(zip(meshes, summaries)):
@@ -52,8 +55,10 @@ def render_states(directories: list[str | Path], out: str | Path, window: tuple[
             )
         activations = ", ".join(f"{v:.2g}" for v in summary["activations"].values())
         plotter.add_text(f"elbow {summary['elbow_angle_deg']:.1f} deg\nactivations ({activations})", font_size=11)
-        # looking along the hinge axis (+x): the sagittal plane, flexion to the right
-        plotter.camera_position = [(900.0, 0.0, 60.0), (0.0, 40.0, 60.0), (0.0, 0.0, 1.0)]
+        # the sagittal plane seen from +x (flexion to the right), every panel at the same scale
+        centre = 0.5 * (lo + hi)
+        distance = 1.15 * max(hi[1] - lo[1], hi[2] - lo[2]) / (2.0 * np.tan(np.radians(15.0)))
+        plotter.camera_position = [(centre[0] + distance, centre[1], centre[2]), tuple(centre), (0.0, 0.0, 1.0)]
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     plotter.screenshot(out)

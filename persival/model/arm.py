@@ -260,6 +260,8 @@ class ArmModel:
         target = self.validate_activations(activations)
         t0 = time.perf_counter()
         start = warm_start if warm_start is not None else self.base_state()
+        if warm_start is None and not np.any(target):
+            return start  # the hanging arm itself (its statistics are those of its solve)
         state = self._equilibrium(target, start.muscle_states, start.elbow_angle_deg)
         state.wall_time_s = time.perf_counter() - t0
         return state
