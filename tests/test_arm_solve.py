@@ -113,7 +113,8 @@ def test_state_files_and_render(arm, states, tmp_path):
     # not blank: coloured muscles on a white background in every panel
     for k in range(3):
         panel = image[:, 200 * k : 200 * (k + 1)]
-        assert (panel.std(axis=2) > 30).mean() > 0.01
+        assert (panel.min(axis=2) < 250).mean() > 0.05  # something drawn
+        assert (panel.std(axis=2) > 10).mean() > 0.03  # and coloured (bones are grey)
     with pytest.raises(FileNotFoundError, match="state.json"):
         render_states([tmp_path], tmp_path / "x.png")
 
