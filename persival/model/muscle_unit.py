@@ -20,6 +20,7 @@ new state by interpolation.
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -59,6 +60,11 @@ def line_rotation(d_ref: np.ndarray, d: np.ndarray) -> np.ndarray:
 class MuscleUnit:
     """The FE problem of one muscle with its length and activation prescribed."""
 
+    small_step_mm = 1.0  # length changes up to this are taken in one load step (then halved if needed)
+    library_gap_mm = 8.0  # solved states at most this far apart are interpolated as a start
+    library_spacing_mm = 0.25  # a new state this close to a kept one is not kept
+    library_size = 600  # states kept per muscle (each n_nodes x 3 floats)
+
     def __init__(
         self,
         name: str,
@@ -84,6 +90,8 @@ class MuscleUnit:
         # the insertion face's unit axial translation: dx/dL of the constrained DOFs
         self._axial = np.zeros(self.assembler.n_dofs)
         self._axial[self._insertion_face.dofs] = np.tile(self.direction, len(self._insertion_face.nodes))
+        # solved states by activation, sorted by length: starts for later solves (_from_library)
+        self._library: dict[float, list[MuscleState]] = {}
 
     @property
     def options(self) -> SolverOptions:
@@ -128,8 +136,59 @@ class MuscleUnit:
         if not np.isfinite(length) or length <= 0:
             raise ValueError(f"muscle {self.name!r}: length must be positive, got {length}")
         start = start or self.rest_state()
+        state = self._from_library(float(length), float(activation))
+        if state is None:
+            state = self._continue(float(length), float(activation), start)
+        self._remember(state)
+        return state
+
+    def _from_library(self, length: float, activation: float) -> MuscleState | None:
+        """Newton from the interpolation of two solved states of the same activation that
+        bracket ``length`` (within ``library_gap_mm``); None if there are none or it fails.
+
+        Linear interpolation in L keeps the insertion face exactly where L puts it. Passive
+        muscles going slack are the expensive part of a state (a bowed muscle bending further:
+        100 to 200 Newton iterations by continuation); between solved neighbours it takes a few.
+        """
+        states = self._library.get(activation)
+        if not states:
+            return None
+        lengths = [s.length for s in states]
+        k = bisect.bisect_left(lengths, length)
+        if k == 0 or k == len(states):
+            return None
+        lo, hi = states[k - 1], states[k]
+        if hi.length - lo.length > self.library_gap_mm:
+            return None
+        w = (length - lo.length) / (hi.length - lo.length)
+        guess = (1.0 - w) * lo.displacement + w * hi.displacement
+        self._insertion_face.start[:] = self._insertion_face.end[:] = (length - self.mesh_length) * self.direction
+        options = self.solver.options
+        self.solver.options = replace(options, initial_step=1.0, min_step=1.0, max_iterations=min(options.max_iterations, 12))
+        try:
+            solution = self.solver.solve(activation, initial_displacement=guess, initial_activation=activation)
+        except ConvergenceError:
+            return None
+        finally:
+            self.solver.options = options
+        return self._state(length, activation, solution)
+
+    def _remember(self, state: MuscleState) -> None:
+        states = self._library.setdefault(state.activation, [])
+        lengths = [s.length for s in states]
+        k = bisect.bisect_left(lengths, state.length)
+        near = [s for s in states[max(k - 1, 0) : k + 1] if abs(s.length - state.length) < self.library_spacing_mm]
+        if near or sum(len(v) for v in self._library.values()) >= self.library_size:
+            return
+        states.insert(k, state)
+
+    def _continue(self, length: float, activation: float, start: MuscleState) -> MuscleState:
         self._insertion_face.start[:] = (start.length - self.mesh_length) * self.direction
         self._insertion_face.end[:] = (length - self.mesh_length) * self.direction
+        options = self.solver.options
+        if abs(length - start.length) <= self.small_step_mm and activation == start.activation:
+            # the joint iteration's late corrections: one load step, Newton from the last state
+            self.solver.options = replace(options, initial_step=1.0)
         try:
             solution = self.solver.solve(
                 float(activation), initial_displacement=start.displacement, initial_activation=float(start.activation)
@@ -139,9 +198,14 @@ class MuscleUnit:
                 f"muscle {self.name!r} from length {start.length:.1f} mm, activation {start.activation:.2f} "
                 f"to {length:.1f} mm, {activation:.2f}: {exc}"
             ) from exc
-        tension, stiffness = self._stiffness(solution.displacement, float(activation))
+        finally:
+            self.solver.options = options
+        return self._state(length, activation, solution)
+
+    def _state(self, length: float, activation: float, solution) -> MuscleState:
+        tension, stiffness = self._stiffness(solution.displacement, activation)
         return MuscleState(
-            float(length), float(activation), solution.displacement, tension, stiffness,
+            length, activation, solution.displacement, tension, stiffness,
             solution.max_volume_change, solution.statistics.iterations,
         )
 
