@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from persival.model.arm_file import MUSCLE_ORDER, Muscle, load_model_file
-from persival.model.assembly import MaterialField, Tet10Assembler
+from persival.model.assembly import MaterialField
 from persival.model.constraints import Hinge
 from persival.model.muscle_unit import MuscleState, MuscleUnit, line_rotation
 from persival.model.geometry import swept_solid_mesh
