@@ -201,11 +201,8 @@ class ArmModel:
         return MaterialField.from_cells(4, self.mesh.cell_data["fibre"], gamma, k, pre)
 
     def line_moment_arm(self, muscle: Muscle, theta_deg: float) -> float:
-        """Moment arm (mm, flexion positive) of the straight origin-insertion line at theta."""
-        origin = np.asarray(muscle.origin, dtype=float)
-        insertion = self.forearm_point(muscle.insertion, theta_deg)
-        direction = (origin - insertion) / np.linalg.norm(origin - insertion)
-        return float(np.cross(insertion - self.centre, direction) @ self.axis)
+        """Moment arm (mm, flexion positive) of the straight origin-insertion line at theta: -dL/dtheta."""
+        return -self.muscle_length(muscle, theta_deg)[1]
 
     # -- loads --------------------------------------------------------------------------------
     def gravity_moment(self, theta_deg: float) -> float:
