@@ -68,6 +68,47 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         (out / "curves.json").write_text(json.dumps({"profile": profile, "curves": serial, "predicted_deg": predicted}, indent=1))
         console.print(f"wrote {out / 'curves.json'} and {plot_curves(data, out / 'curves.png')}")
 
+    @app.command()
+    def accuracy(
+        test: Path = typer.Option(..., "--test", help="Campaign store of held-out FE states (e.g. a random design)."),
+        surrogate: list[str] = typer.Option(..., "--surrogate", help="LABEL=DIR of a fitted surface surrogate (fit-sg or adapt), repeatable."),
+        out: Path = typer.Option(Path("results/accuracy"), "--out", help="Output directory (accuracy.json, accuracy.png)."),
+    ) -> None:
+        """Surrogates vs held-out FE states: MaxAE, MAE, MaxRE, MRE (SPEC 7) and elbow-angle error."""
+        import json
+
+        from rich.console import Console
+        from rich.table import Table
+
+        from persival.evaluate.surrogate_accuracy import accuracy_report, plot_accuracy
+
+        console = Console()
+        try:
+            labelled = {}
+            for item in surrogate:
+                label, sep, path = item.partition("=")
+                if not sep or not label or not path:
+                    raise ValueError(f"--surrogate expects LABEL=DIR, got {item!r}")
+                labelled[label] = Path(path)
+            report = accuracy_report(labelled, test)
+        except (ValueError, FileNotFoundError, KeyError) as exc:
+            console.print(f"[red]error:[/red] {exc}")
+            raise typer.Exit(2) from None
+        table = Table(title=f"surface surrogates vs {report['test_states']} held-out FE states ({test})")
+        columns = [("FE states", "fe_states", "{:d}"), ("MaxAE mm", "max MaxAE_mm", "{:.3f}"),
+                   ("MAE mm", "mean MAE_mm", "{:.3f}"), ("MaxRE %", "max MaxRE_pct", "{:.2f}"),
+                   ("MRE %", "mean MRE_pct", "{:.3f}"), ("max angle err deg", "max angle_error_deg", "{:.3f}"),
+                   ("mean angle err deg", "mean angle_error_deg", "{:.3f}")]
+        table.add_column("surrogate")
+        for name, _, _ in columns:
+            table.add_column(name, justify="right")
+        for label, row in report["surrogates"].items():
+            table.add_row(f"{label} ({row['kind']})", *(fmt.format(row[key]) for _, key, fmt in columns))
+        console.print(table)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "accuracy.json").write_text(json.dumps(report, indent=1))
+        console.print(f"wrote {out / 'accuracy.json'} and {plot_accuracy(report, out / 'accuracy.png')}")
+
     @bench_app.command("fe")
     def bench_fe(
         mesh_size: float = typer.Option(6.3, help="Element size of the 40 x 300 mm spindle (mm)."),

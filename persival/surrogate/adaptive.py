@@ -30,6 +30,7 @@ from persival.surrogate.sparse_grid import SparseGrid
 
 __all__ = [
     "AdaptiveResult",
+    "initial_grid",
     "RefinementStep",
     "consistent_closure",
     "refine_adaptive",
@@ -127,6 +128,17 @@ def surplus_indicator(grid: SparseGrid, norm: str = "l2", output_scale=None) -> 
     if norm == "max":
         return np.abs(c).max(axis=1)
     raise ValueError(f"norm must be 'l2' or 'max', got {norm!r}")
+
+
+def initial_grid(dim: int, level: int, degree: int = 3) -> SparseGrid:
+    """Start of a refinement: ``regular(level)`` for level >= 1; level 0 is the 2^dim corners
+    (all coordinates on the boundary), the coarsest consistent boundary grid."""
+    if level >= 1:
+        return SparseGrid(dim, level, degree)
+    if level != 0:
+        raise ValueError(f"initial level must be >= 0, got {level}")
+    corners = np.array(np.meshgrid(*[[0, 1]] * dim, indexing="ij")).reshape(dim, -1).T
+    return SparseGrid.from_levels_indices(np.zeros_like(corners), corners, degree)
 
 
 @dataclass
@@ -232,7 +244,7 @@ def refine_adaptive(
     center: bool = False,
     initial: tuple[SparseGrid, np.ndarray] | None = None,
 ) -> AdaptiveResult:
-    """Grow a grid from ``regular(initial_level)`` (or ``initial`` = (grid, values)) until
+    """Grow a grid from :func:`initial_grid` (or ``initial`` = (grid, values)) until
     ``max_points`` is reached, no refinable point has indicator >= ``tol``, or nothing fits.
 
     ``simulate(points (k, dim)) -> (k,) or (k, n_out)`` is called once on the initial grid
@@ -243,7 +255,7 @@ def refine_adaptive(
     if max_points < 1:
         raise ValueError("max_points must be >= 1")
     if initial is None:
-        grid = SparseGrid(dim, initial_level, degree)
+        grid = initial_grid(dim, initial_level, degree)
         if grid.n_points > max_points:
             raise ValueError(
                 f"the initial regular grid already has {grid.n_points} > max_points={max_points} points"

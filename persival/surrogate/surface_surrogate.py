@@ -60,17 +60,33 @@ class SurfaceSurrogate:
                 raise ValueError(f"the campaign has no surface {self.muscle!r}; it has {sorted(reference.surfaces)}")
             positions = store.surface_positions(self.muscle)
             angles = store.elbow_angles()
-            self.metadata = {"store": str(store_path), "model_hash": reference.model_hash, **reference.description}
-        surface = reference.surfaces[self.muscle]
-        self.reference_points = np.asarray(surface.reference_points, dtype=float)
-        self.triangles = np.asarray(surface.triangles)
+            metadata = {"store": str(store_path), "model_hash": reference.model_hash, **reference.description}
         grid = self._matching_grid(design.points, self.degree)
         rows = grid.locate(design.points)
-        values = np.empty((len(rows), positions.shape[1] * 3 + 1))
-        values[rows] = np.column_stack([positions.reshape(len(rows), -1), angles])
+        order = np.argsort(rows)  # design rows in grid order
+        return self.fit_values(grid, positions[order], angles[order], reference.surfaces[self.muscle], metadata)
+
+    def fit_values(self, grid: SparseGrid, positions, angles, surface, metadata: dict | None = None) -> SurfaceSurrogate:
+        """Fit to FE values at the points of any grid (regular or adaptive), given in ``grid.points`` order.
+
+        ``positions`` (N, n_nodes, 3) mm, ``angles`` (N,) deg, ``surface`` the muscle's
+        :class:`~persival.campaign.simulator.SurfaceTopology`.
+        """
+        positions = np.asarray(positions, dtype=np.float64)
+        angles = np.asarray(angles, dtype=np.float64)
+        n = grid.n_points
+        if positions.shape != (n, len(surface.reference_points), 3) or angles.shape != (n,):
+            raise ValueError(
+                f"expected positions ({n}, {len(surface.reference_points)}, 3) and angles ({n},), got "
+                f"{positions.shape} and {angles.shape}"
+            )
+        self.reference_points = np.asarray(surface.reference_points, dtype=float)
+        self.triangles = np.asarray(surface.triangles)
+        values = np.column_stack([positions.reshape(n, -1), angles])
         # centred: SG++'s boundary B-splines do not reproduce constants (docs/sparse_grid.md)
         self.grid = grid.fit(values, center=True)
-        self.metadata.update({"muscle": self.muscle, "level": grid.level, "degree": self.degree, "grid_points": grid.n_points})
+        self.metadata = {**(metadata or {}), "muscle": self.muscle, "level": grid.level,
+                         "degree": self.degree, "grid_points": grid.n_points}
         return self
 
     @property

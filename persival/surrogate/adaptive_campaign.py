@@ -1,0 +1,195 @@
+"""Spatially adaptive sparse grid grown on a real campaign (SPEC section 4, "beyond the paper").
+
+:func:`persival.surrogate.adaptive.refine_adaptive` decides which points to add; this module
+supplies its ``simulate`` callback: every point it asks for is looked up among the done states
+already on disk (earlier steps, a resumed run, or seed stores such as a regular campaign of the
+same model), and only the points found nowhere go through the campaign runner, into one new
+store per step. The result is a :class:`SurfaceSurrogate` like the regular one, whose metadata
+records the refinement history (grid size after every step), so the accuracy stage can replay
+the error against the number of FE states without solving anything again.
+
+Stores of an adaptive run are named by the digest of their design: re-running the same command
+after an interruption finds every done state in the pool and only solves what is still missing.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from persival.campaign.design import Design
+from persival.campaign.simulator import SimulatorSpec, SurfaceTopology
+from persival.campaign.store import CampaignStore
+from persival.surrogate.adaptive import refine_adaptive
+from persival.surrogate.surface_surrogate import SurfaceSurrogate
+
+__all__ = ["StatePool", "AdaptiveCampaignResult", "run_adaptive_campaign"]
+
+
+def _key(point: np.ndarray) -> bytes:
+    # Grid points are dyadic rationals, computed the same way everywhere: exact bits match.
+    return np.asarray(point, dtype="<f8").tobytes()
+
+
+class StatePool:
+    """Done states of one model (one muscle's surface + elbow angle) gathered from several stores."""
+
+    def __init__(self, muscle: str) -> None:
+        self.muscle = muscle
+        self.surface: SurfaceTopology | None = None
+        self.model_hash: str | None = None
+        self.spec: SimulatorSpec | None = None
+        self._values: dict[bytes, np.ndarray] = {}
+        self.stores: list[str] = []
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def add_store(self, path: str | Path) -> int:
+        """Read every done state of ``path``; returns how many were new to the pool."""
+        with CampaignStore.open(path) as store:
+            reference = store.reference
+            if self.muscle not in reference.surfaces:
+                raise ValueError(f"{path} has no surface {self.muscle!r}; it has {sorted(reference.surfaces)}")
+            if self.model_hash is None:
+                self.model_hash, self.spec = reference.model_hash, store.spec
+                self.surface = reference.surfaces[self.muscle]
+            elif reference.model_hash != self.model_hash or store.spec != self.spec:
+                raise ValueError(
+                    f"{path} was computed by another model or simulator ({store.spec}, model "
+                    f"{reference.model_hash[:12]}) than the pool ({self.spec}, model {self.model_hash[:12]})"
+                )
+            done = np.flatnonzero(store.done_mask())
+            points = store.activations[done]
+            positions = store.surface_positions(self.muscle, done) if len(done) else np.empty((0, 0, 3))
+            angles = store.elbow_angles()[done]
+        added = 0
+        for p, x, a in zip(points, positions, angles):
+            k = _key(p)
+            if k not in self._values:
+                self._values[k] = np.append(x.ravel(), a)
+                added += 1
+        self.stores.append(str(path))
+        return added
+
+    def lookup(self, points: np.ndarray) -> tuple[np.ndarray | None, np.ndarray]:
+        """(values (k, 3 n_nodes + 1) with NaN rows where missing, found mask (k,))."""
+        found = np.array([_key(p) in self._values for p in points], dtype=bool)
+        if not found.any():
+            return None, found
+        n_out = len(next(iter(self._values.values())))
+        values = np.full((len(points), n_out), np.nan)
+        for r in np.flatnonzero(found):
+            values[r] = self._values[_key(points[r])]
+        return values, found
+
+
+@dataclass
+class AdaptiveCampaignResult:
+    surrogate: SurfaceSurrogate
+    steps: list[dict]  # per refinement: grid size, points simulated, points reused, store
+    simulated: int  # states solved by this run
+    reused: int  # grid points found in the pool (earlier runs or seed stores)
+    stop_reason: str
+    wall_time_s: float
+
+
+def run_adaptive_campaign(
+    out: str | Path,
+    spec: SimulatorSpec,
+    *,
+    max_points: int,
+    muscle: str = "biceps",
+    degree: int = 3,
+    initial_level: int = 0,
+    refinements_per_step: int = 2,
+    norm: str = "max",
+    seed_stores: Sequence[str | Path] = (),
+    scheduler: str | None = "inline",
+    n_workers: int | None = None,
+    timeout_s: float | None = None,
+    max_attempts: int = 3,
+    progress: bool = True,
+    log: Callable[[str], None] = lambda message: None,
+) -> AdaptiveCampaignResult:
+    """Grow an adaptive grid to ``max_points`` FE states and save its surrogate in ``out/surrogate``.
+
+    The refinement indicator is the ``norm`` ("max" or "l2") of each point's hierarchical
+    surplus row over every surface coordinate (mm) and the elbow angle (deg): "max" refines
+    where some node or the angle is worst interpolated, matching the MaxAE metric (SPEC 7).
+    ``scheduler`` defaults to in-process so that the simulator, its meshes and its solved
+    states stay warm from one step to the next.
+    """
+    from persival.campaign.runner import run_campaign
+
+    t0 = time.perf_counter()
+    out = Path(out)
+    stores_dir = out / "stores"
+    stores_dir.mkdir(parents=True, exist_ok=True)
+    pool = StatePool(muscle)
+    for path in seed_stores:
+        pool.add_store(path)
+    for path in sorted(stores_dir.glob("*.zarr")):
+        pool.add_store(path)
+    if pool.spec is not None and pool.spec != spec:
+        raise ValueError(f"the seed stores / earlier steps were computed with {pool.spec}, not {spec}")
+
+    steps: list[dict] = []
+    counts = {"simulated": 0, "reused": 0}
+
+    def simulate(points: np.ndarray) -> np.ndarray:
+        values, found = pool.lookup(points)
+        missing = np.flatnonzero(~found)
+        step = {"new_points": len(points), "reused": int(found.sum()), "simulated": len(missing), "store": None}
+        counts["reused"] += int(found.sum())
+        if len(missing):
+            design = Design(points[missing], np.arange(len(missing)),
+                            {"kind": "adaptive", "step": len(steps), "muscle": muscle})
+            path = stores_dir / f"step-{design.digest()[:12]}.zarr"
+            log(f"step {len(steps)}: {len(points)} new grid points, {int(found.sum())} already solved, "
+                f"solving {len(missing)} into {path.name}")
+            summary = run_campaign(path, design, spec, scheduler=scheduler, n_workers=n_workers,
+                                   timeout_s=timeout_s, max_attempts=max_attempts, progress=progress)
+            if summary["failed"] or summary["missing"]:
+                raise RuntimeError(
+                    f"{summary['failed']} state(s) of {path} failed ({summary['failure_reasons']}); an "
+                    "interpolating grid needs every point: retry them with `persival campaign run "
+                    f"--store {path} --retry-failed`, then run this command again"
+                )
+            pool.add_store(path)
+            counts["simulated"] += summary["this_run"]["computed"]
+            step["store"] = path.name
+            values, found = pool.lookup(points)
+        else:
+            log(f"step {len(steps)}: {len(points)} new grid points, all already solved")
+        steps.append(step)
+        return values
+
+    result = refine_adaptive(
+        simulate, 5, max_points=max_points, degree=degree, initial_level=initial_level,
+        refinements_per_step=refinements_per_step, norm=norm, center=True,
+    )
+    for step, n in zip(steps, np.cumsum([s["new_points"] for s in steps])):
+        step["grid_points"] = int(n)
+    surrogate = SurfaceSurrogate(muscle, degree).fit_values(
+        result.grid, result.values[:, :-1].reshape(len(result.values), -1, 3), result.values[:, -1],
+        pool.surface,
+        {"store": [str(s) for s in pool.stores], "model_hash": pool.model_hash,
+         "simulator": json.loads(spec.to_json()),
+         "adaptive": {"grid_points_per_step": [s["grid_points"] for s in steps], "norm": norm,
+                      "initial_level": initial_level, "refinements_per_step": refinements_per_step,
+                      "max_points": max_points, "stop_reason": result.stop_reason}},
+    )
+    surrogate.save(out / "surrogate")
+    res = AdaptiveCampaignResult(surrogate, steps, counts["simulated"], counts["reused"],
+                                 result.stop_reason, time.perf_counter() - t0)
+    (out / "adaptive.json").write_text(json.dumps(
+        {"steps": steps, "simulated": res.simulated, "reused": res.reused,
+         "stop_reason": res.stop_reason, "wall_time_s": res.wall_time_s,
+         "grid_points": surrogate.grid.n_points}, indent=1))
+    return res
