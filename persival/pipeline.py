@@ -2,10 +2,11 @@
 
 1. model     - validate and mesh the built-in arm (quick profile): reference VTU + geometry.json
 2. FE        - three equilibria of the arm (hanging, biceps 0.5, flexors 1): arm.json, arm/<state>/, arm.png
-3. campaign  - a level-1 sparse-grid campaign (243 states) into a zarr store, with the fast analytic
-               simulator until the arm's calibration lands (see README: status)
-4. surrogate - B-spline sparse grid fitted to the store (biceps surface + elbow angle), checked on
-               held-out states of the same simulator: surrogate.json + sg_biceps/
+3. campaign  - a level-1 sparse-grid campaign (243 states) and 50 random held-out states into zarr
+               stores, with the fast analytic simulator (an arm campaign takes ~30 min: README)
+4. surrogate - B-spline sparse grid fitted to the store (biceps surface + elbow angle): sg_biceps/;
+               an adaptive grid of the same FE budget grown from the store: sg_adaptive/
+5. evaluate  - both against the held-out states, SPEC 7 metrics: accuracy/accuracy.json + .png
 """
 
 from __future__ import annotations
@@ -86,45 +87,53 @@ def arm_stage(out: Path, profile: str = "quick", console=None) -> dict:
     return result
 
 
-def campaign_stage(out: Path, level: int = 1) -> Path:
+def campaign_stage(out: Path, level: int = 1, n_test: int = 50) -> tuple[Path, Path]:
+    """The sparse-grid training campaign and a random held-out campaign of the same simulator."""
     from persival.campaign.design import Design
     from persival.campaign.runner import INLINE, run_campaign
     from persival.campaign.simulator import SimulatorSpec
 
-    store = out / "campaign.zarr"
-    run_campaign(store, Design.sparse_grid(level), SimulatorSpec("analytic", {}), scheduler=INLINE, progress=True)
-    return store
+    spec = SimulatorSpec("analytic", {})
+    store, test = out / "campaign.zarr", out / "held_out.zarr"
+    run_campaign(store, Design.sparse_grid(level), spec, scheduler=INLINE, progress=True)
+    run_campaign(test, Design.random(n_test, seed=1), spec, scheduler=INLINE, progress=True)
+    return store, test
 
 
-def surrogate_stage(out: Path, store_path: Path, n_test: int = 50) -> dict:
-    from persival.campaign.simulator import make_simulator
+def surrogate_stage(out: Path, store_path: Path) -> dict:
+    """The regular SG on the campaign, and an adaptive SG grown to the same FE budget (reusing its states)."""
     from persival.campaign.store import CampaignStore
+    from persival.surrogate.adaptive_campaign import run_adaptive_campaign
     from persival.surrogate.surface_surrogate import SurfaceSurrogate
 
     surrogate = SurfaceSurrogate("biceps").fit(store_path)
     surrogate.save(out / "sg_biceps")
     with CampaignStore.open(store_path) as store:
-        simulator = make_simulator(store.spec)
-    test = np.random.default_rng(0).uniform(0.0, 1.0, (n_test, 5))
-    positions, angles = surrogate.predict(test)
-    errors, angle_errors = [], []
-    for alpha, x, theta in zip(test, positions, angles):
-        result, _ = simulator.simulate(alpha)
-        errors.append(np.linalg.norm(x - result.surfaces["biceps"], axis=1).max())
-        angle_errors.append(abs(theta - result.elbow_angle_deg))
+        spec = store.spec
+    adaptive = run_adaptive_campaign(out / "sg_adaptive", spec, max_points=surrogate.grid.n_points,
+                                     seed_stores=[store_path], progress=False)
+    test = np.random.default_rng(0).uniform(0.0, 1.0, (1, 5))
+    surrogate.predict(test, dtype=np.float32)
     t0 = time.perf_counter()
     for _ in range(100):
-        surrogate.predict(test[:1], dtype=np.float32)
-    report = {
+        surrogate.predict(test, dtype=np.float32)
+    return {
         **surrogate.metadata,
         "surface_nodes": surrogate.n_nodes,
-        "held_out_states": n_test,
-        "max_node_error_mm": float(np.max(errors)),
-        "mean_of_max_node_error_mm": float(np.mean(errors)),
-        "max_angle_error_deg": float(np.max(angle_errors)),
+        "adaptive_grid_points": adaptive.surrogate.grid.n_points,
+        "adaptive_states_solved": adaptive.simulated,
         "predict_ms_per_state_batch1_float32": (time.perf_counter() - t0) / 100 * 1e3,
     }
-    _write_json(out / "surrogate.json", report)
+
+
+def evaluate_stage(out: Path, test_store: Path) -> dict:
+    """Both surrogates against the held-out states (SPEC 7 metrics): accuracy.json + accuracy.png."""
+    from persival.evaluate.surrogate_accuracy import accuracy_report, plot_accuracy
+
+    report = accuracy_report({"regular": out / "sg_biceps", "adaptive": out / "sg_adaptive" / "surrogate"}, test_store)
+    (out / "accuracy").mkdir(exist_ok=True)
+    _write_json(out / "accuracy" / "accuracy.json", report)
+    plot_accuracy(report, out / "accuracy" / "accuracy.png")
     return report
 
 
@@ -140,16 +149,25 @@ def run(out: Path, profile: str = "quick") -> dict:
         console.print(f"  {name:16s} {g['tet10']:5d} tet10, {g['surface_nodes']:5d} surface nodes, moment arm at 90 deg {g['line_moment_arm_mm']['90']:+.1f} mm")
     console.rule("2/4 FE: the arm hanging, biceps at 0.5, all flexors at 1 (joint equilibrium)")
     fe = arm_stage(out, profile, console)
-    console.rule("3/4 campaign: level-1 sparse grid (analytic simulator)")
-    store = campaign_stage(out)
-    console.rule("4/4 surrogate: B-spline sparse grid on the store")
+    console.rule("3/5 campaign: level-1 sparse grid + 50 random held-out states (analytic simulator)")
+    store, test_store = campaign_stage(out)
+    console.rule("4/5 surrogate: B-spline sparse grid on the store, and an adaptive one of the same FE budget")
     report = surrogate_stage(out, store)
-    console.print(f"  held-out max node error {report['max_node_error_mm']:.3f} mm, angle error {report['max_angle_error_deg']:.3f} deg, "
-                  f"{report['predict_ms_per_state_batch1_float32']:.3f} ms per state")
+    console.print(f"  regular: {report['grid_points']} points, {report['predict_ms_per_state_batch1_float32']:.3f} ms per state; "
+                  f"adaptive: {report['adaptive_grid_points']} points ({report['adaptive_states_solved']} new states solved)")
+    console.rule("5/5 evaluate: surrogates vs held-out states (SPEC 7)")
+    accuracy = evaluate_stage(out, test_store)
+    for label, row in accuracy["surrogates"].items():
+        console.print(f"  {label:8s} {row['fe_states']:4d} FE states: MaxAE {row['max MaxAE_mm']:.3f} mm, MAE {row['mean MAE_mm']:.3f} mm, "
+                      f"MaxRE {row['max MaxRE_pct']:.2f} %, max angle error {row['max angle_error_deg']:.3f} deg")
     console.rule("results")
     console.print(f"  {out}/geometry.json, mesh_*.vtu, bone_*.vtu   (open the VTU files in ParaView)")
     console.print(f"  {out}/arm.json, {out}/arm/<state>/state.json + VTU, picture {out}/arm.png")
     console.print(f"  {out}/campaign.zarr   (persival campaign status --store {out}/campaign.zarr)")
-    console.print(f"  {out}/surrogate.json, {out}/sg_biceps/ (persival.surrogate.surface_surrogate.SurfaceSurrogate.load)")
+    console.print(f"  {out}/held_out.zarr   (50 random states the surrogates never saw)")
+    console.print(f"  {out}/sg_biceps/, {out}/sg_adaptive/surrogate/ (persival.surrogate.surface_surrogate.SurfaceSurrogate.load)")
+    console.print(f"  {out}/accuracy/accuracy.json, picture {out}/accuracy/accuracy.png")
     console.print("  viewer: not built yet (see README status)")
-    return {"geometry": geometry, "fe": fe, "surrogate": report}
+    summary = {"geometry": geometry, "fe": fe, "surrogate": report, "accuracy": accuracy["surrogates"]}
+    _write_json(out / "summary.json", summary)
+    return summary

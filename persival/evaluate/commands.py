@@ -100,10 +100,11 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                    ("MRE %", "mean MRE_pct", "{:.3f}"), ("max angle err deg", "max angle_error_deg", "{:.3f}"),
                    ("mean angle err deg", "mean angle_error_deg", "{:.3f}")]
         table.add_column("surrogate")
+        table.add_column("grid")
         for name, _, _ in columns:
             table.add_column(name, justify="right")
         for label, row in report["surrogates"].items():
-            table.add_row(f"{label} ({row['kind']})", *(fmt.format(row[key]) for _, key, fmt in columns))
+            table.add_row(label, row["kind"], *(fmt.format(row[key]) for _, key, fmt in columns))
         console.print(table)
         out.mkdir(parents=True, exist_ok=True)
         (out / "accuracy.json").write_text(json.dumps(report, indent=1))
