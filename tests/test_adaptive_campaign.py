@@ -145,3 +145,27 @@ def test_metrics_by_hand():
     bad[0, 0, 0] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         state_errors(bad, ref, u)
+
+
+def test_adapt_command_stops_on_tolerance_and_rejects_bad_input(tmp_path):
+    from persival.surrogate import commands
+
+    app, bench = typer.Typer(), typer.Typer()
+    app.add_typer(bench, name="bench")
+    commands.register(app, bench)
+    runner = CliRunner()
+    args = ["surrogate", "adapt", "--out", str(tmp_path / "ad"), "--max-points", "243", "--simulator", "analytic",
+            "--option", "mesh_size=14", "--no-progress"]
+    res = runner.invoke(app, [*args, "--tol", "1e6"])  # no surplus reaches 1 km: the corners only
+    assert res.exit_code == 0, res.output
+    assert "32 points" in res.output and "tolerance" in res.output
+    res = runner.invoke(app, [*args, "--tol", "5"])  # refine while some surplus exceeds 5 mm / deg
+    assert res.exit_code == 0, res.output
+    meta = json.loads((tmp_path / "ad" / "surrogate" / "surrogate.json").read_text())
+    assert meta["adaptive"]["tol"] == 5.0 and meta["grid_points"] > 32
+    bad = runner.invoke(app, ["surrogate", "adapt", "--out", str(tmp_path / "x"), "--max-points", "10",
+                              "--simulator", "external"])
+    assert bad.exit_code == 2 and "arm or analytic" in bad.output
+    small = runner.invoke(app, ["surrogate", "adapt", "--out", str(tmp_path / "y"), "--max-points", "10",
+                                "--simulator", "analytic", "--no-progress"])
+    assert small.exit_code == 2 and "32 > max_points=10" in small.output

@@ -109,6 +109,7 @@ def run_adaptive_campaign(
     initial_level: int = 0,
     refinements_per_step: int = 2,
     norm: str = "max",
+    tol: float = 0.0,
     seed_stores: Sequence[str | Path] = (),
     scheduler: str | None = "inline",
     n_workers: int | None = None,
@@ -117,7 +118,8 @@ def run_adaptive_campaign(
     progress: bool = True,
     log: Callable[[str], None] = lambda message: None,
 ) -> AdaptiveCampaignResult:
-    """Grow an adaptive grid to ``max_points`` FE states and save its surrogate in ``out/surrogate``.
+    """Grow an adaptive grid to ``max_points`` FE states (or until no refinable point's indicator
+    reaches ``tol``, in mm / deg) and save its surrogate in ``out/surrogate``.
 
     The refinement indicator is the ``norm`` ("max" or "l2") of each point's hierarchical
     surplus row over every surface coordinate (mm) and the elbow angle (deg): "max" refines
@@ -172,7 +174,7 @@ def run_adaptive_campaign(
 
     result = refine_adaptive(
         simulate, 5, max_points=max_points, degree=degree, initial_level=initial_level,
-        refinements_per_step=refinements_per_step, norm=norm, center=True,
+        refinements_per_step=refinements_per_step, norm=norm, tol=tol, center=True,
     )
     for step, n in zip(steps, np.cumsum([s["new_points"] for s in steps])):
         step["grid_points"] = int(n)
@@ -183,7 +185,7 @@ def run_adaptive_campaign(
          "simulator": json.loads(spec.to_json()),
          "adaptive": {"grid_points_per_step": [s["grid_points"] for s in steps], "norm": norm,
                       "initial_level": initial_level, "refinements_per_step": refinements_per_step,
-                      "max_points": max_points, "stop_reason": result.stop_reason}},
+                      "max_points": max_points, "tol": tol, "stop_reason": result.stop_reason}},
     )
     surrogate.save(out / "surrogate")
     res = AdaptiveCampaignResult(surrogate, steps, counts["simulated"], counts["reused"],

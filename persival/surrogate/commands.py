@@ -44,6 +44,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         initial_level: int = typer.Option(0, "--initial-level", min=0, help="Start grid: 0 = the 32 corners, L >= 1 = regular level L."),
         refinements: int = typer.Option(2, "--refinements-per-step", min=1, help="Points refined per step (each brings its children and their ancestors)."),
         norm: str = typer.Option("max", "--norm", help="Refinement indicator over a point's surplus row: max or l2."),
+        tol: float = typer.Option(0.0, "--tol", min=0.0, help="Stop when no refinable point's indicator (mm or deg) reaches this."),
         muscle: str = typer.Option("biceps", "--muscle", help="Surface to interpolate."),
         degree: int = typer.Option(3, "--degree", help="Odd B-spline degree."),
         scheduler: str = typer.Option("inline", "--scheduler", help="inline (default: the simulator stays warm between steps), a dask address, or 'local' for a LocalCluster per step."),
@@ -66,7 +67,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             spec = build_spec(simulator, option, None, None, None, [], None)
             result = run_adaptive_campaign(
                 out, spec, max_points=max_points, muscle=muscle, degree=degree, initial_level=initial_level,
-                refinements_per_step=refinements, norm=norm, seed_stores=seed_store,
+                refinements_per_step=refinements, norm=norm, tol=tol, seed_stores=seed_store,
                 scheduler=None if scheduler == "local" else scheduler, progress=progress, log=console.print,
             )
         except (ValueError, RuntimeError, DesignError, StoreError, UnknownSimulatorError, FileNotFoundError) as exc:
