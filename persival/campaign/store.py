@@ -148,8 +148,10 @@ class CampaignStore:
         path = Path(path)
         if path.exists():
             raise StoreError(f"{path} already exists")
-        if not path.parent.is_dir():
-            raise StoreError(f"parent directory {path.parent} does not exist")
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise StoreError(f"cannot create the parent directory of {path}: {exc}") from None
         tmp = path.with_name(f".{path.name}.creating-{os.getpid()}")
         if tmp.exists():
             shutil.rmtree(tmp)

@@ -80,6 +80,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
+        from persival.campaign.store import StoreError
         from persival.evaluate.surrogate_accuracy import accuracy_report, plot_accuracy
 
         console = Console()
@@ -91,7 +92,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                     raise ValueError(f"--surrogate expects LABEL=DIR, got {item!r}")
                 labelled[label] = Path(path)
             report = accuracy_report(labelled, test)
-        except (ValueError, FileNotFoundError, KeyError) as exc:
+        except (ValueError, FileNotFoundError, KeyError, StoreError) as exc:
             console.print(f"[red]error:[/red] {exc}")
             raise typer.Exit(2) from None
         table = Table(title=f"surface surrogates vs {report['test_states']} held-out FE states ({test})")

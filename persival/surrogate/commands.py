@@ -22,12 +22,13 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         """Fit the B-spline sparse grid (surface positions + elbow angle) to a finished campaign."""
         from rich.console import Console
 
+        from persival.campaign.store import StoreError
         from persival.surrogate.surface_surrogate import SurfaceSurrogate
 
         console = Console()
         try:
             surrogate = SurfaceSurrogate(muscle, degree).fit(store)
-        except (ValueError, FileNotFoundError) as exc:
+        except (ValueError, FileNotFoundError, StoreError) as exc:
             console.print(f"[red]error:[/red] {exc}")
             raise typer.Exit(2) from None
         surrogate.save(out)
