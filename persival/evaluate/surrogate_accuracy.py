@@ -115,11 +115,13 @@ def plot_accuracy(report: dict, path: str | Path) -> Path:
     fig, axes = plt.subplots(1, 3, figsize=(13, 4))
     metrics = [("max MaxAE_mm", "largest node error (mm)"), ("mean MAE_mm", "mean node error (mm)"),
                ("max angle_error_deg", "largest elbow-angle error (deg)")]
+    colours = {label: f"C{i}" for i, label in enumerate(report["surrogates"])}
     for ax, (key, title) in zip(axes, metrics):
         for label, steps in report["refinement"].items():
-            ax.plot([s["fe_states"] for s in steps], [s[key] for s in steps], "o-", ms=3, label=f"{label} (refinement)")
+            ax.plot([s["fe_states"] for s in steps], [s[key] for s in steps], "o-", ms=3, color=colours[label],
+                    label=f"{label}: after each refinement step")
         for label, row in report["surrogates"].items():
-            ax.plot(row["fe_states"], row[key], "s", ms=8, label=label)
+            ax.plot(row["fe_states"], row[key], "s", ms=8, color=colours[label], label=f"{label} ({row['kind']})")
         ax.set_xlabel("FE states")
         ax.set_yscale("log")
         ax.set_title(title)
