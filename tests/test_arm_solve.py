@@ -130,3 +130,33 @@ def test_moment_curves_predict_the_hanging_arm(arm, states):
     assert predicted_equilibrium(curves, (0, 0, 0, 0, 0)) == pytest.approx(theta, abs=0.05)
     assert abs(curves["biceps"]["passive_tension_N"][2]) < 2.0  # biceps meshed at 60 deg
     assert np.all(curves["biceps"]["active_moment_Nmm"] > 5 * curves["biceps"]["passive_moment_Nmm"])
+
+
+def test_a_stalled_activation_jump_detours_through_the_taut_mesh_pose(arm, monkeypatch):
+    unit = arm.units["brachialis"]
+    slack = unit.mesh_length - 15.0
+    start = unit._continue(slack, 0.0, unit.rest_state(), detour=False)  # passive and shortened: bowed
+    taut = unit._continue(unit.mesh_length, 1.0, unit.rest_state(), detour=False)
+    reference = unit._continue(slack, 1.0, taut, detour=False)
+    assert reference.tension > 0.0 > start.tension - 1.0  # activated it pulls; slack it barely pushes
+
+    real_solve = unit.solver.solve
+    calls = []
+
+    def stall_first(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 1:
+            raise ConvergenceError("line search failed to reduce the residual")
+        return real_solve(*args, **kwargs)
+
+    monkeypatch.setattr(unit.solver, "solve", stall_first)
+    state = unit._continue(slack, 1.0, start)
+    assert len(calls) == 3  # the stalled jump, then activate at the mesh pose, then shorten
+    np.testing.assert_allclose(state.displacement, reference.displacement, rtol=0, atol=1e-9)
+
+    def always_stall(*args, **kwargs):
+        raise ConvergenceError("line search failed to reduce the residual")
+
+    monkeypatch.setattr(unit.solver, "solve", always_stall)
+    with pytest.raises(ConvergenceError, match="muscle .brachialis. from length .* line search failed"):
+        unit._continue(slack, 1.0, start)

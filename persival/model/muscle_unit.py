@@ -182,7 +182,7 @@ class MuscleUnit:
             return
         states.insert(k, state)
 
-    def _continue(self, length: float, activation: float, start: MuscleState) -> MuscleState:
+    def _continue(self, length: float, activation: float, start: MuscleState, detour: bool = True) -> MuscleState:
         self._insertion_face.start[:] = (start.length - self.mesh_length) * self.direction
         self._insertion_face.end[:] = (length - self.mesh_length) * self.direction
         options = self.solver.options
@@ -194,13 +194,27 @@ class MuscleUnit:
                 float(activation), initial_displacement=start.displacement, initial_activation=float(start.activation)
             )
         except ConvergenceError as exc:
-            raise ConvergenceError(
-                f"muscle {self.name!r} from length {start.length:.1f} mm, activation {start.activation:.2f} "
-                f"to {length:.1f} mm, {activation:.2f}: {exc}"
-            ) from exc
+            failure = exc
+        else:
+            return self._state(length, activation, solution)
         finally:
             self.solver.options = options
-        return self._state(length, activation, solution)
+        if detour and activation != start.activation:
+            # Activating a slack, bowed muscle at fixed ends can snap through (the bow pulls
+            # straight), where load stepping stalls. The same state is reached without a limit
+            # point from the straight mesh pose: activate there first, then change the length.
+            # A fallback, not a guarantee (on the coarse mesh isometric activation at the mesh
+            # pose itself stalls for the biceps and the brachioradialis): if it fails too, the
+            # error reports the direct path.
+            try:
+                taut = self._continue(self.mesh_length, activation, self.rest_state(), detour=False)
+                return self._continue(length, activation, taut, detour=False)
+            except ConvergenceError:
+                pass
+        raise ConvergenceError(
+            f"muscle {self.name!r} from length {start.length:.1f} mm, activation {start.activation:.2f} "
+            f"to {length:.1f} mm, {activation:.2f}: {failure}"
+        ) from failure
 
     def _state(self, length: float, activation: float, solution) -> MuscleState:
         tension, stiffness = self._stiffness(solution.displacement, activation)
