@@ -1,7 +1,7 @@
 """`persival run`: the end-to-end job over the stages that exist, each reading the last one's artifact.
 
 1. model     - validate and mesh the built-in arm (quick profile): reference VTU + geometry.json
-2. FE        - three equilibria of the arm (hanging, biceps 0.5, flexors 1): arm.json, arm/<state>/, arm.png
+2. FE        - three equilibria of the arm (hanging, biceps 0.5, flexors 1; each from the hanging arm): arm.json, arm/<state>/, arm.png
 3. campaign  - a level-1 sparse-grid campaign (243 states) and 50 random held-out states into zarr
                stores, with the fast analytic simulator (an arm campaign takes ~30 min: README)
 4. surrogate - B-spline sparse grid fitted to the store (biceps surface + elbow angle): sg_biceps/;
@@ -59,16 +59,21 @@ ARM_STATES = {
 
 
 def arm_stage(out: Path, profile: str = "quick", console=None) -> dict:
-    """Three FE states of the arm, each warm-started from the last: state.json + VTU per state,
-    and a picture of the three (``arm.png``)."""
+    """Three FE states of the arm, each continued from the hanging arm: state.json + VTU per
+    state, and a picture of the three (``arm.png``).
+
+    Not from each other: from biceps 0.5 (92 deg) the jump to every flexor at 1 activates the
+    slack, bowed brachioradialis at fixed length, a snap-through on which load stepping stalls
+    (docs/arm_model.md); from the hanging arm the same state converges."""
     from persival.evaluate.render import render_states
     from persival.model.arm import ArmModel
     from persival.model.output import write_state
 
     arm = ArmModel(profile=profile)
-    rows, state, directories = {}, None, []
+    rows, directories = {}, []
+    hanging = arm.base_state()
     for name, activations in ARM_STATES.items():
-        state = arm.solve(activations, warm_start=state)
+        state = hanging if not any(activations) else arm.solve(activations, warm_start=hanging)
         directories.append(write_state(arm, state, out / "arm" / name))
         rows[name] = {
             "activations": list(activations),
