@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from persival.evaluate.figures import save_figure
 from persival.model.arm import ArmModel
 from persival.model.arm_file import MUSCLE_ORDER
 from persival.model.solver import ConvergenceError
@@ -114,8 +115,4 @@ def plot_curves(curves: dict, path: str | Path) -> Path:
     axes[0].set_ylabel("moment about the elbow (N mm, flexion +)")
     axes[1].legend(fontsize=8)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=120)

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from persival.evaluate.figures import save_figure
 from persival.evaluate.metrics import state_errors, summarize
 from persival.surrogate.sparse_grid import SparseGrid
 from persival.surrogate.surface_surrogate import SurfaceSurrogate
@@ -129,8 +130,4 @@ def plot_accuracy(report: dict, path: str | Path) -> Path:
     axes[0].legend(fontsize=8)
     fig.suptitle(f"surrogates vs {report['test_states']} held-out FE states")
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110)
