@@ -199,7 +199,7 @@ class MuscleUnit:
             return self._state(length, activation, solution)
         finally:
             self.solver.options = options
-        if detour and activation != start.activation:
+        if detour and activation != start.activation and start.length != self.mesh_length:
             # Activating a slack, bowed muscle at fixed ends can snap through (the bow pulls
             # straight), where load stepping stalls. The same state is reached without a limit
             # point from the straight mesh pose: activate there first, then change the length.
