@@ -11,6 +11,7 @@ exactly without solving or reading any FE state again.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -71,20 +72,17 @@ def surrogate_errors(surrogate: SurfaceSurrogate, test: HeldOutStates) -> dict[s
     return _predict_errors(surrogate.predict, test)
 
 
-def refinement_path(surrogate: SurfaceSurrogate) -> list[tuple[int, callable]]:
-    """(grid points, predict) after every refinement step of an adaptive surrogate ([] otherwise)."""
+def refinement_path(surrogate: SurfaceSurrogate) -> list[tuple[int, SurfaceSurrogate]]:
+    """(grid points, surrogate) after every refinement step of an adaptive surrogate ([] otherwise)."""
     sizes = surrogate.metadata.get("adaptive", {}).get("grid_points_per_step", [])
     grid = surrogate.grid
     out = []
     for n in sizes:
         sub = SparseGrid.from_levels_indices(grid.levels[:n], grid.indices[:n], grid.degree)
         sub.fit(grid.predict(grid.points[:n]), center=True)
-
-        def predict(x, sub=sub):
-            v = sub.predict(x)
-            return v[:, :-1].reshape(len(v), surrogate.n_nodes, 3), v[:, -1]
-
-        out.append((int(n), predict))
+        step = copy.copy(surrogate)  # same surface and metadata, the step's grid
+        step.grid = sub
+        out.append((int(n), step))
     return out
 
 
@@ -102,7 +100,7 @@ def accuracy_report(surrogates: dict[str, str | Path], test_store: str | Path) -
                        **summarize(surrogate_errors(surrogate, test))}
         path = refinement_path(surrogate)
         if path:
-            paths[label] = [{"fe_states": n, **summarize(_predict_errors(p, test))} for n, p in path]
+            paths[label] = [{"fe_states": n, **summarize(_predict_errors(s.predict, test))} for n, s in path]
     return {"test_store": str(test_store), "test_states": len(test.angles), "surrogates": rows, "refinement": paths}
 
 
