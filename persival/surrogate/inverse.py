@@ -1,0 +1,148 @@
+"""The inverse problem of SPEC 5: least-effort activations for an elbow angle.
+
+``alpha_opt(Theta) = argmin_{alpha in [0,1]^5} |Theta - theta(alpha)| + w sum(alpha)`` (w = 0.05,
+theta in degrees) on the SG surrogate of the elbow angle. The absolute value is not smooth;
+with a slack variable t it becomes the smooth problem
+
+    min t + w sum(alpha)   s.t.   t >= Theta - theta(alpha),  t >= theta(alpha) - Theta,
+                                  0 <= alpha <= 1,  t >= 0,
+
+solved by SLSQP with the SG's exact gradients. Starts: for all targets at once, the objective is
+evaluated on one fixed candidate set (a scrambled Sobol' sample of the cube plus its corners,
+one batched SG evaluation), and each target starts from its best few distinct candidates.
+The reachable range is found the same way (min and max of theta over the cube).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize
+
+__all__ = ["InverseSolution", "InverseProblem", "EFFORT_WEIGHT"]
+
+#: SPEC 5: weight of the effort sum(alpha) against one degree of angle error
+EFFORT_WEIGHT = 0.05
+
+
+@dataclass
+class InverseSolution:
+    target_deg: np.ndarray  # (n,)
+    activations: np.ndarray  # (n, 5)
+    achieved_deg: np.ndarray  # (n,)
+    objective: np.ndarray  # (n,)
+    reachable: np.ndarray  # (n,) bool: target inside the reachable range
+
+    def rows(self) -> list[dict]:
+        """The JSON rows of ``persival inverse --json``."""
+        return [{"target_deg": float(t), "activations": [float(v) for v in a], "achieved_deg": float(g),
+                 "objective": float(o), "reachable": bool(r)}
+                for t, a, g, o, r in zip(self.target_deg, self.activations, self.achieved_deg, self.objective,
+                                         self.reachable)]
+
+
+def _check_targets(targets) -> np.ndarray:
+    t = np.atleast_1d(np.asarray(targets, dtype=np.float64))
+    if t.ndim != 1 or len(t) == 0:
+        raise ValueError(f"targets must be a non-empty list of angles in degrees, got shape {t.shape}")
+    if not np.isfinite(t).all():
+        raise ValueError(f"elbow-angle targets must be finite, got {t[~np.isfinite(t)][0]}")
+    return t
+
+
+class InverseProblem:
+    """SPEC 5 on any model with ``predict_angle(alpha) -> (m,)`` and ``angle_gradient(alpha) -> (m, 5)``."""
+
+    def __init__(self, angle_model, effort_weight: float = EFFORT_WEIGHT, n_candidates: int = 4096,
+                 seed: int = 0) -> None:
+        if not (hasattr(angle_model, "predict_angle") and hasattr(angle_model, "angle_gradient")):
+            raise ValueError("the surrogate has no elbow-angle output (need predict_angle and angle_gradient): "
+                             "use a sparse-grid surrogate fitted to a campaign")
+        self.model = angle_model
+        self.weight = float(effort_weight)
+        from scipy.stats import qmc
+
+        corners = np.array(np.meshgrid(*[[0.0, 1.0]] * 5, indexing="ij")).reshape(5, -1).T
+        sobol = qmc.Sobol(5, scramble=True, seed=seed).random(n_candidates)
+        self.candidates = np.vstack([corners, sobol])
+        self.candidate_angles = angle_model.predict_angle(self.candidates)
+        self._range: tuple[float, float] | None = None
+
+    # ------------------------------------------------------------------ reachable range
+    def reachable_range(self) -> tuple[float, float]:
+        """(min, max) elbow angle over [0,1]^5 (deg), by multi-start L-BFGS-B on the SG."""
+        if self._range is None:
+            ends = []
+            for sign in (1.0, -1.0):
+                order = np.argsort(sign * self.candidate_angles)[:5]
+                best = min((minimize(lambda a: sign * self.model.predict_angle(a[None])[0], self.candidates[k],
+                                     jac=lambda a: sign * self.model.angle_gradient(a[None])[0],
+                                     method="L-BFGS-B", bounds=[(0.0, 1.0)] * 5) for k in order),
+                           key=lambda r: r.fun)
+                ends.append(sign * best.fun)
+            self._range = (float(ends[0]), float(ends[1]))
+        return self._range
+
+    # ------------------------------------------------------------------ solving
+    def objective(self, activations, target: float) -> np.ndarray:
+        a = np.atleast_2d(activations)
+        return np.abs(target - self.model.predict_angle(a)) + self.weight * a.sum(axis=1)
+
+    def _refine(self, start: np.ndarray, target: float):
+        model, w = self.model, self.weight
+        theta0 = model.predict_angle(start[None])[0]
+        z0 = np.append(start, abs(target - theta0))
+        grad_f = np.append(np.full(5, w), 1.0)
+
+        def gap(z):  # [t - (Theta - theta), t + (Theta - theta)] >= 0
+            d = target - model.predict_angle(z[None, :5])[0]
+            return np.array([z[5] - d, z[5] + d])
+
+        def gap_jac(z):
+            g = model.angle_gradient(z[None, :5])[0]
+            return np.array([np.append(g, 1.0), np.append(-g, 1.0)])
+
+        result = minimize(lambda z: z[5] + w * z[:5].sum(), z0, jac=lambda z: grad_f, method="SLSQP",
+                          bounds=[(0.0, 1.0)] * 5 + [(0.0, None)],
+                          constraints=[{"type": "ineq", "fun": gap, "jac": gap_jac}],
+                          options={"ftol": 1e-12, "maxiter": 300})
+        a = np.clip(result.x[:5], 0.0, 1.0)
+        return a, float(self.objective(a, target)[0])
+
+    def starts_for(self, targets: np.ndarray, n_starts: int) -> np.ndarray:
+        """(n_targets, n_starts, 5): the best distinct candidates per target, all targets in one pass."""
+        J = np.abs(targets[:, None] - self.candidate_angles[None, :]) + self.weight * self.candidates.sum(axis=1)[None, :]
+        best = np.argsort(J, axis=1)[:, : 8 * n_starts]
+        out = np.empty((len(targets), n_starts, 5))
+        for i, row in enumerate(best):
+            picked: list[np.ndarray] = []
+            for k in row:  # distinct: at least 0.2 apart, so the starts probe different basins
+                c = self.candidates[k]
+                if all(np.abs(c - p).max() > 0.2 for p in picked):
+                    picked.append(c)
+                if len(picked) == n_starts:
+                    break
+            while len(picked) < n_starts:
+                picked.append(self.candidates[row[len(picked)]])
+            out[i] = picked
+        return out
+
+    def solve(self, targets, n_starts: int = 4, warm_starts=None) -> InverseSolution:
+        """alpha_opt for every target (deg). ``warm_starts`` (n, 5): extra starts (continuation)."""
+        targets = _check_targets(targets)
+        starts = self.starts_for(targets, n_starts)
+        if warm_starts is not None:
+            starts = np.concatenate([np.asarray(warm_starts, dtype=float).reshape(len(targets), 1, 5), starts], axis=1)
+        alphas = np.empty((len(targets), 5))
+        objective = np.empty(len(targets))
+        for i, target in enumerate(targets):
+            results = [self._refine(s, target) for s in starts[i]]
+            alphas[i], objective[i] = min(results, key=lambda r: r[1])
+        lo, hi = self.reachable_range()
+        achieved = self.model.predict_angle(alphas)
+        return InverseSolution(targets, alphas, achieved, objective, (targets >= lo - 1e-9) & (targets <= hi + 1e-9))
+
+    def solve_from(self, target: float, start) -> tuple[np.ndarray, float]:
+        """One target from one given start (the continuation of the activation model)."""
+        return self._refine(np.clip(np.asarray(start, dtype=float), 0.0, 1.0), float(target))
