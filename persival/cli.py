@@ -1,14 +1,17 @@
 """The `persival` command line: one subcommand per pipeline stage, plus `run` (end to end).
 
 Each stage module owns its commands; this file only wires them together so that the
-CLI stays a thin layer over the Python API.
+CLI stays a thin layer over the Python API. Errors take one path (persival.cli_errors).
 """
 
 from __future__ import annotations
 
 import typer
 
+from persival.cli_errors import ErrorReportingGroup
+
 app = typer.Typer(
+    cls=ErrorReportingGroup,
     help="PerSival: FE upper-limb model -> sparse-grid / neural surrogates -> real-time deployment.",
     no_args_is_help=True,
     pretty_exceptions_show_locals=False,
@@ -17,13 +20,23 @@ bench_app = typer.Typer(help="Speed benchmarks (print tables).", no_args_is_help
 app.add_typer(bench_app, name="bench")
 
 
+@app.callback()
+def main(
+    debug: bool = typer.Option(False, "--debug", help="Show the traceback of an internal error (a bug) instead of one line."),
+) -> None:
+    """PerSival: FE upper-limb model -> sparse-grid / neural surrogates -> real-time deployment."""
+    # ErrorReportingGroup reads --debug from the context; nothing to do here.
+
+
 def _register() -> None:
     # Imported here so that `persival --help` stays fast and each stage stays independent.
+    from persival import run_command
     from persival.campaign import commands as campaign_commands
     from persival.evaluate import commands as evaluate_commands
     from persival.model import commands as model_commands
     from persival.surrogate import commands as surrogate_commands
 
+    run_command.register(app)
     model_commands.register(app, bench_app)
     campaign_commands.register(app, bench_app)
     surrogate_commands.register(app, bench_app)

@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 
 from persival.model.arm import ArmModel, muscle_profile
-from persival.model.arm_file import MUSCLE_ORDER, ModelFileError, default_model_path, load_model_file
+from persival.model.arm_file import ModelFileError, load_model_file
+from persival.model.defaults import default_model_path
 from persival.model.geometry import swept_solid_mesh
+from persival.vocabulary import MUSCLES
 
 
 def edited(tmp_path, old, new):
@@ -18,7 +20,7 @@ def edited(tmp_path, old, new):
 
 def test_default_model_loads_with_five_muscles():
     model, digest = load_model_file()
-    assert [m.name for m in model.ordered_muscles()] == list(MUSCLE_ORDER)
+    assert [m.name for m in model.ordered_muscles()] == list(MUSCLES)
     assert len(digest) == 64
     assert set(model.profiles) >= {"quick", "paper"}
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from persival.model.arm_file import MUSCLE_ORDER
-from persival.model.campaign import ArmSimulator
+from persival.vocabulary import MUSCLES
+from persival.campaign.arm_simulator import ArmSimulator
 
 
 @pytest.fixture(scope="module")
@@ -14,7 +14,7 @@ def simulator():
 
 def test_reference_surfaces_are_closed_and_outward(simulator):
     reference = simulator.reference()
-    assert list(reference.surfaces) == list(MUSCLE_ORDER)
+    assert list(reference.surfaces) == list(MUSCLES)
     for name, surface in reference.surfaces.items():
         tri = surface.triangles
         edges = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
@@ -38,7 +38,7 @@ def test_tissue_layout_and_fibres(simulator):
     gamma = arm.mesh.cell_data["muscle_fraction"]
     fibre = arm.mesh.cell_data["fibre"]
     assert np.allclose(np.linalg.norm(fibre, axis=1), 1.0)
-    for name in MUSCLE_ORDER:
+    for name in MUSCLES:
         cells = arm.muscle_cells[name]
         s = arm.mesh.cell_data["arclength"][cells]
         # tendon (gamma = 0) at both ends, pure muscle in the middle of the belly

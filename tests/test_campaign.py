@@ -24,7 +24,6 @@ from persival.campaign.external import ExternalSimulator
 from persival.campaign.importers import ResultImportError, parse_selector, read_surfaces
 from persival.campaign.runner import run_campaign
 from persival.campaign.simulator import (
-    MUSCLES,
     SimulatorSpec,
     UnknownSimulatorError,
     register_simulator,
@@ -36,6 +35,7 @@ from persival.campaign.store import (
     StoreVersionError,
 )
 from persival.campaign.surface import boundary_triangles
+from persival.vocabulary import MUSCLES
 
 # A coarse analytic model keeps stores small and writes fast; the code paths are the same.
 ANALYTIC = SimulatorSpec("analytic", {"mesh_size": 14.0})

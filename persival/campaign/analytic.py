@@ -23,13 +23,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from persival.campaign.simulator import (
-    MUSCLES,
-    N_ACTIVATIONS,
-    ReferenceGeometry,
-    SimulationResult,
-    SurfaceTopology,
-)
+from persival.campaign.simulator import ReferenceGeometry, SimulationResult, SurfaceTopology
+from persival.vocabulary import MUSCLES, check_activation_vector
 
 __all__ = ["AnalyticSimulator"]
 
@@ -173,10 +168,7 @@ class AnalyticSimulator:
 
     def simulate(self, activations, warm_start=None, attempt: int = 0):
         t0 = time.perf_counter()
-        alpha = np.asarray(activations, dtype=np.float64)
-        if alpha.shape != (N_ACTIVATIONS,) or not np.isfinite(alpha).all() \
-                or alpha.min() < 0.0 or alpha.max() > 1.0:
-            raise ValueError(f"activations must be 5 finite values in [0, 1], got {alpha!r}")
+        alpha = check_activation_vector(activations)
         if self.delay_s:
             time.sleep(self.delay_s)
         theta = float(flexion_angle_deg(alpha))

@@ -1,4 +1,8 @@
-"""The built-in arm as a campaign simulator (the ``arm`` kind of persival.campaign)."""
+"""The built-in FE arm (persival.model) as a campaign simulator: the ``arm`` kind of the registry.
+
+It lives with the other simulators because it adapts the model to the campaign's interface;
+the model stage itself knows nothing of campaigns.
+"""
 
 from __future__ import annotations
 
@@ -8,9 +12,9 @@ import numpy as np
 
 from persival.campaign.simulator import ReferenceGeometry, SimulationResult, SurfaceTopology
 from persival.model.arm import ArmModel, ArmState
-from persival.model.arm_file import MUSCLE_ORDER
 from persival.model.mesh import Tet10Mesh
 from persival.model.output import muscle_submesh
+from persival.vocabulary import MUSCLES
 
 
 def display_triangles(faces6: np.ndarray) -> np.ndarray:
@@ -40,7 +44,7 @@ class ArmSimulator:
     def __init__(self, model_file: str | None = None, profile: str = "quick") -> None:
         self.arm = ArmModel(model_file, profile)
         self.default_options = self.arm.options
-        self.surfaces = {name: muscle_surface(self.arm, name) for name in MUSCLE_ORDER}
+        self.surfaces = {name: muscle_surface(self.arm, name) for name in MUSCLES}
 
     def reference(self) -> ReferenceGeometry:
         return ReferenceGeometry(

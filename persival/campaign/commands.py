@@ -7,6 +7,8 @@ from pathlib import Path
 
 import typer
 
+from persival.cli_errors import check_output_dir, user_errors
+
 _SIMULATOR_HELP = ("Simulator kind: arm (the built-in FE model), analytic (closed-form test model) "
                    "or external.")
 
@@ -16,13 +18,6 @@ def _parse_value(text: str):
         return json.loads(text)
     except json.JSONDecodeError:
         return text
-
-
-def _fail(message: str) -> None:
-    from rich.console import Console
-
-    Console(stderr=True).print(f"[bold red]error:[/] {message}", highlight=False)
-    raise typer.Exit(code=2)
 
 
 def build_design(design: str | None, level: int, n_random: int, seed: int):
@@ -123,7 +118,9 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         from persival.campaign.simulator import UnknownSimulatorError
         from persival.campaign.store import CampaignStore, StoreError
 
-        try:
+        # No out=: a failure half-way keeps the states solved so far (the store resumes); the
+        # runner checks every input before it creates a new store.
+        with user_errors(DesignError, StoreError, UnknownSimulatorError, TypeError):
             if store.exists():
                 existing = CampaignStore.open(store)
                 d = existing.design if design is None else build_design(design, level, n_random, seed)
@@ -140,8 +137,6 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             summary = run_campaign(store, d, spec, scheduler=scheduler, n_workers=workers,
                                    timeout_s=timeout, max_attempts=max_attempts,
                                    retry_failed=retry_failed, progress=progress)
-        except (DesignError, StoreError, UnknownSimulatorError, ValueError, TypeError) as exc:
-            _fail(str(exc))
         _print_summary(summary)
 
     @campaign_app.command("status")
@@ -152,13 +147,11 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         """Done / failed / missing counts, failure reasons and provenance of a store."""
         from persival.campaign.store import CampaignStore, StoreError
 
-        try:
+        with user_errors(StoreError):
             s = CampaignStore.open(store)
             summary = s.summary()
             summary["provenance"] = s.provenance
             summary["simulator_spec"] = json.loads(s.spec.to_json())
-        except StoreError as exc:
-            _fail(str(exc))
         if as_json:
             typer.echo(json.dumps(summary, indent=1))
         else:
@@ -174,10 +167,9 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         from persival.campaign.export import export_vtu
         from persival.campaign.store import StoreError
 
-        try:
+        with user_errors(StoreError, out=out):
+            check_output_dir(out)
             res = export_vtu(store, out, progress=progress)
-        except (StoreError, ValueError) as exc:
-            _fail(str(exc))
         typer.echo(f"wrote {res['states']} states to {res['out']} (open campaign.pvd in ParaView)")
 
 

@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.campaign.simulator import MUSCLES, N_ACTIVATIONS
+from persival.grid_points import level_index_points, regular_levels_indices
+from persival.vocabulary import MUSCLES, N_ACTIVATIONS, check_activations
 
 __all__ = ["Design", "DesignError", "solve_order", "chunks"]
 
@@ -57,13 +58,12 @@ class Design:
     # ---- constructors ------------------------------------------------------------------------
     @classmethod
     def sparse_grid(cls, level: int, degree: int = 3) -> Design:
-        """The points of the regular B-spline boundary sparse grid (SPEC section 4)."""
-        from persival.surrogate.sparse_grid import SparseGrid
-
+        """The points of the regular B-spline boundary sparse grid (SPEC section 4), in the
+        surrogate's point order (``degree`` is recorded only: the points do not depend on it)."""
         if isinstance(level, bool) or not isinstance(level, (int, np.integer)) or level < 1:
             raise DesignError(f"sparse-grid level must be an integer >= 1, got {level!r}")
-        grid = SparseGrid(N_ACTIVATIONS, int(level), degree)
-        return cls(grid.points.copy(), np.arange(grid.n_points),
+        points = level_index_points(*regular_levels_indices(N_ACTIVATIONS, int(level)))
+        return cls(points, np.arange(len(points)),
                    {"kind": "sparse-grid", "level": int(level), "degree": int(degree)})
 
     @classmethod
@@ -112,27 +112,11 @@ class Design:
 
 
 def _validate_points(points) -> np.ndarray:
+    # A design is a batch of activation vectors: the vocabulary's check, as a DesignError.
     try:
-        arr = np.array(points, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise DesignError(f"design points must be numeric, got {exc}") from None
-    if arr.ndim != 2 or arr.shape[1] != N_ACTIVATIONS:
-        raise DesignError(f"design points must have shape (n, {N_ACTIVATIONS}) "
-                          f"({', '.join(MUSCLES)}), got {arr.shape}")
-    if len(arr) == 0:
-        raise DesignError("the design is empty")
-    bad = ~np.isfinite(arr).all(axis=1)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise DesignError(f"{int(bad.sum())} design point(s) are not finite, first: row {i} = "
-                          f"{arr[i].tolist()}")
-    outside = ((arr < 0.0) | (arr > 1.0)).any(axis=1)
-    if outside.any():
-        i = int(np.flatnonzero(outside)[0])
-        j = int(np.flatnonzero((arr[i] < 0.0) | (arr[i] > 1.0))[0])
-        raise DesignError(f"{int(outside.sum())} design point(s) lie outside [0, 1]^5, first: "
-                          f"row {i}, {MUSCLES[j]} = {float(arr[i, j])!r}")
-    return arr
+        return check_activations(points, what="design points")
+    except ValueError as exc:
+        raise DesignError(str(exc)) from None
 
 
 def _validate_ids(ids, n: int) -> np.ndarray:

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.campaign.simulator import MUSCLES
 from persival.campaign.store import CampaignStore
+from persival.vocabulary import MUSCLES
 
 __all__ = ["export_vtu"]
 

@@ -35,13 +35,12 @@ import numpy as np
 
 from persival.campaign.importers import read_surfaces
 from persival.campaign.simulator import (
-    MUSCLES,
-    N_ACTIVATIONS,
     ReferenceGeometry,
     SimulationResult,
     SimulationTimeout,
     SurfaceTopology,
 )
+from persival.vocabulary import MUSCLES, N_ACTIVATIONS, check_activation_vector
 
 __all__ = ["ExternalSimulator", "ExternalCommandError"]
 
@@ -132,9 +131,7 @@ class ExternalSimulator:
 
     def simulate(self, activations, warm_start=None, attempt: int = 0):
         t0 = time.perf_counter()
-        alpha = np.asarray(activations, dtype=np.float64)
-        if alpha.shape != (N_ACTIVATIONS,) or not np.isfinite(alpha).all():
-            raise ValueError(f"activations must be 5 finite values, got {alpha!r}")
+        alpha = check_activation_vector(activations)
         ref = self.reference()
         out = Path(tempfile.mkdtemp(prefix="persival-ext-", dir=self.workdir))
         ok = False

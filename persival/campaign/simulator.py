@@ -19,8 +19,6 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 __all__ = [
-    "N_ACTIVATIONS",
-    "MUSCLES",
     "SurfaceTopology",
     "ReferenceGeometry",
     "SimulationResult",
@@ -35,11 +33,6 @@ __all__ = [
     "cached_simulator",
     "forget_cached_simulator",
 ]
-
-#: Five activations in this order (SPEC section 1).
-MUSCLES = ("biceps", "brachialis", "brachioradialis", "triceps", "anconeus")
-N_ACTIVATIONS = len(MUSCLES)
-
 
 @dataclass
 class SurfaceTopology:
@@ -187,11 +180,11 @@ Factory = Callable[..., Simulator]
 
 # Kinds that live in modules not imported by default: "module:attribute" of the factory, imported
 # on first use in whichever process needs it (the driver or a dask worker). "arm" is the built-in
-# FE model; its module registers itself when imported.
+# FE model (persival.model) wrapped by arm_simulator.
 _LAZY: dict[str, str] = {
     "analytic": "persival.campaign.analytic:AnalyticSimulator",
     "external": "persival.campaign.external:ExternalSimulator",
-    "arm": "persival.model.campaign:ArmSimulator",
+    "arm": "persival.campaign.arm_simulator:ArmSimulator",
 }
 _REGISTRY: dict[str, Factory] = {}
 _LOCK = threading.Lock()

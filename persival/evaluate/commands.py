@@ -6,6 +6,9 @@ from pathlib import Path
 
 import typer
 
+from persival.cli_errors import check_output_dir, check_output_file, user_errors
+from persival.model.defaults import profiles_help
+
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     """Attach this stage's commands to the main app and the benchmark group."""
@@ -21,17 +24,15 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         from persival.evaluate.render import render_states
 
         console = Console()
-        try:
+        with user_errors(out=out):
+            check_output_file(out)
             path = render_states(states, out)
-        except (FileNotFoundError, ValueError) as exc:
-            console.print(f"[red]error:[/red] {exc}")
-            raise typer.Exit(2) from None
         console.print(f"wrote {path}")
 
     @app.command()
     def curves(
         model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
-        profile: str = typer.Option("quick", "--profile", help="Mesh profile: coarse, quick or paper."),
+        profile: str = typer.Option("quick", "--profile", help=profiles_help()),
         out: Path = typer.Option(Path("results/curves"), "--out", help="Output directory (curves.json, curves.png)."),
     ) -> None:
         """Every muscle's passive and active moment against the elbow angle, and the equilibria they predict."""
@@ -44,14 +45,13 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
 
         from persival.evaluate.muscle_curves import REPORTED_SETS, muscle_curves, plot_curves, predicted_equilibrium
         from persival.model.arm import ArmModel
-        from persival.model.arm_file import ModelFileError
+        from persival.model.arm_file import load_model_file
 
         console = Console()
-        try:
+        with user_errors():  # before the meshing
+            load_model_file(model)[0].profile(profile)
+            check_output_dir(out)
             arm = ArmModel(model, profile)
-        except (ModelFileError, ValueError) as exc:
-            console.print(f"[red]error:[/red] {exc}")
-            raise typer.Exit(2) from None
         with Progress(console=console) as bar:
             task = bar.add_task("muscle sweeps", total=10)
             data = muscle_curves(arm, progress=lambda name, a: bar.update(task, advance=1, description=f"{name} at activation {a:g}"))
@@ -84,7 +84,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         from persival.evaluate.surrogate_accuracy import accuracy_report, plot_accuracy
 
         console = Console()
-        try:
+        with user_errors(StoreError):
+            check_output_dir(out)
             labelled = {}
             for item in surrogate:
                 label, sep, path = item.partition("=")
@@ -92,9 +93,6 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                     raise ValueError(f"--surrogate expects LABEL=DIR, got {item!r}")
                 labelled[label] = Path(path)
             report = accuracy_report(labelled, test)
-        except (ValueError, FileNotFoundError, KeyError, StoreError) as exc:
-            console.print(f"[red]error:[/red] {exc}")
-            raise typer.Exit(2) from None
         table = Table(title=f"surface surrogates vs {report['test_states']} held-out FE states ({test})")
         columns = [("FE states", "fe_states", "{:d}"), ("MaxAE mm", "max MaxAE_mm", "{:.3f}"),
                    ("MAE mm", "mean MAE_mm", "{:.3f}"), ("MaxRE %", "max MaxRE_pct", "{:.2f}"),
@@ -122,3 +120,19 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         from persival.evaluate.bench_fe import print_fe_benchmark, run_fe_benchmark
 
         print_fe_benchmark(run_fe_benchmark(mesh_size, activation, repeats, backend))
+
+    @bench_app.command("sg")
+    def bench_sg(
+        dim: int = typer.Option(5, min=1, help="Input dimension (activations)."),
+        level: int = typer.Option(2, min=1, help="Regular sparse-grid level."),
+        degree: int = typer.Option(3, min=1, help="Odd B-spline degree."),
+        n_out: int = typer.Option(2809 * 3 + 1, min=1, help="Outputs per state (surface xyz + angle)."),
+        batch: int = typer.Option(1000, min=1, help="Large batch size."),
+        reps: int = typer.Option(300, min=1, help="Repetitions at batch 1 (after warmup)."),
+    ) -> None:
+        """Seconds per whole-surface state of the sparse-grid surrogate, batch 1 and large batch."""
+        from persival.evaluate.bench_sparse_grid import print_benchmark, run_benchmark
+
+        with user_errors():
+            result = run_benchmark(dim=dim, level=level, degree=degree, n_out=n_out, batch=batch, reps_single=reps)
+        print_benchmark(result)

@@ -16,8 +16,8 @@ import numpy as np
 
 from persival.evaluate.figures import save_figure
 from persival.model.arm import ArmModel
-from persival.model.arm_file import MUSCLE_ORDER
 from persival.model.solver import ConvergenceError
+from persival.vocabulary import MUSCLES
 
 
 def muscle_curves(arm: ArmModel, angles=None, progress=None) -> dict:
@@ -73,7 +73,7 @@ def predicted_equilibrium(curves: dict, activations) -> float:
     """
     angles = curves["angles_deg"]
     net = curves["external_moment_Nmm"].copy()
-    for name, a in zip(MUSCLE_ORDER, activations):
+    for name, a in zip(MUSCLES, activations):
         c = curves[name]
         net = net + (1.0 - a) * c["passive_moment_Nmm"] + a * c["active_moment_Nmm"]
     if net[0] <= 0:
@@ -105,7 +105,7 @@ def plot_curves(curves: dict, path: str | Path) -> Path:
     angles = curves["angles_deg"]
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharex=True)
     for ax, key, title in ((axes[0], "passive_moment_Nmm", "passive (activation 0)"), (axes[1], "active_moment_Nmm", "fully active (activation 1)")):
-        for name in MUSCLE_ORDER:
+        for name in MUSCLES:
             ax.plot(angles, curves[name][key], marker="o", ms=3, label=name)
         ax.plot(angles, -curves["external_moment_Nmm"], "k--", label="gravity + joint (to overcome)")
         ax.axhline(0.0, color="0.6", lw=0.8)

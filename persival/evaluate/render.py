@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-MUSCLES = ("biceps", "brachialis", "brachioradialis", "triceps", "anconeus")
+from persival.vocabulary import MUSCLES
 
 
 def read_state_dir(directory: str | Path) -> dict:

@@ -16,13 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.model.arm_file import MUSCLE_ORDER, Muscle, load_model_file
+from persival.model.arm_file import Muscle, load_model_file
 from persival.model.assembly import MaterialField
 from persival.model.constraints import Hinge
 from persival.model.muscle_unit import MuscleState, MuscleUnit, line_rotation
 from persival.model.geometry import swept_solid_mesh
 from persival.model.mesh import Tet10Mesh
 from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
+from persival.vocabulary import MUSCLES, check_activation_vector
 
 
 def rotation_about(axis: np.ndarray, theta_deg: float) -> np.ndarray:
@@ -77,7 +78,7 @@ class ArmState:
 
     def summary(self) -> dict:
         return {
-            "activations": {n: float(a) for n, a in zip(MUSCLE_ORDER, self.activations)},
+            "activations": {n: float(a) for n, a in zip(MUSCLES, self.activations)},
             "elbow_angle_deg": self.elbow_angle_deg,
             "moment_residual_Nmm": self.moment_residual,
             "muscle_moments_Nmm": self.muscle_moments,
@@ -231,17 +232,6 @@ class ArmModel:
     def cell_activation(self, activations: np.ndarray) -> np.ndarray:
         return np.asarray(activations, dtype=float)[self.mesh.cell_data["muscle"]]
 
-    @staticmethod
-    def validate_activations(activations) -> np.ndarray:
-        a = np.asarray(activations, dtype=float)
-        if a.shape != (5,):
-            raise ValueError(f"need 5 activations ({', '.join(MUSCLE_ORDER)}), got shape {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError("activations must be finite")
-        if np.any((a < 0) | (a > 1)):
-            raise ValueError(f"activations must lie in [0, 1], got {a.tolist()}")
-        return a
-
     def base_state(self) -> ArmState:
         """The hanging arm (all activations 0): every muscle continued from its mesh pose."""
         if self._base is None:
@@ -254,7 +244,7 @@ class ArmModel:
 
     def solve(self, activations, warm_start: ArmState | None = None) -> ArmState:
         """Equilibrium for the five activations, continued from ``warm_start`` (or the hanging arm)."""
-        target = self.validate_activations(activations)
+        target = check_activation_vector(activations)
         t0 = time.perf_counter()
         start = warm_start if warm_start is not None else self.base_state()
         if warm_start is None and not np.any(target):

@@ -11,14 +11,14 @@ from __future__ import annotations
 
 import hashlib
 import tomllib
-from importlib import resources
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-MUSCLE_ORDER = ("biceps", "brachialis", "brachioradialis", "triceps", "anconeus")
+from persival.model.defaults import default_model_path
+from persival.vocabulary import MUSCLES
 
 Vector = tuple[float, float, float]
 
@@ -121,11 +121,11 @@ class ArmModelFile(_Strict):
     @model_validator(mode="after")
     def _consistent(self):
         names = [m.name for m in self.muscles]
-        missing = [n for n in MUSCLE_ORDER if n not in names]
-        extra = [n for n in names if n not in MUSCLE_ORDER]
+        missing = [n for n in MUSCLES if n not in names]
+        extra = [n for n in names if n not in MUSCLES]
         if missing or extra or len(names) != len(set(names)):
             raise ValueError(
-                f"the model needs exactly the muscles {', '.join(MUSCLE_ORDER)}; "
+                f"the model needs exactly the muscles {', '.join(MUSCLES)}; "
                 f"missing: {missing or 'none'}, unknown or repeated: {extra or [n for n in names if names.count(n) > 1] or 'none'}"
             )
         lo, hi = self.joint.limits_deg
@@ -153,7 +153,7 @@ class ArmModelFile(_Strict):
         raise KeyError(name)
 
     def ordered_muscles(self) -> list[Muscle]:
-        return [self.muscle(n) for n in MUSCLE_ORDER]
+        return [self.muscle(n) for n in MUSCLES]
 
     def profile(self, name: str) -> Profile:
         if name not in self.profiles:
@@ -171,10 +171,6 @@ def _distance_to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.norm(p - (a + t * d)))
 
 
-def default_model_path() -> Path:
-    return Path(str(resources.files("persival.model").joinpath("default_arm.toml")))
-
-
 def model_hash(text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
@@ -188,7 +184,7 @@ def load_model_file(path: str | Path | None = None) -> tuple[ArmModelFile, str]:
     try:
         text = path.read_text()
     except OSError as exc:
-        raise ModelFileError(f"cannot read model file {path}: {exc}") from exc
+        raise ModelFileError(f"cannot read model file {path}: {(exc.strerror or str(exc)).lower()}") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from persival.model.arm import ArmModel, ArmState
-from persival.model.arm_file import MUSCLE_ORDER
+from persival.vocabulary import MUSCLES
 
 
 def tube_surface(start: np.ndarray, end: np.ndarray, radius: float, segments: int = 24) -> tuple[np.ndarray, np.ndarray]:
@@ -70,7 +70,7 @@ def write_state(arm: ArmModel, state: ArmState, out_dir: str | Path, extra: dict
             summary.update(extra)
         (tmp / "state.json").write_text(json.dumps(summary, indent=2))
         u = state.displacement
-        for name in MUSCLE_ORDER:
+        for name in MUSCLES:
             nodes, cells = muscle_submesh(arm, name)
             cell_ids = arm.muscle_cells[name]
             meshio.Mesh(

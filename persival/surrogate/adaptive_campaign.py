@@ -131,8 +131,7 @@ def run_adaptive_campaign(
 
     t0 = time.perf_counter()
     out = Path(out)
-    stores_dir = out / "stores"
-    stores_dir.mkdir(parents=True, exist_ok=True)
+    stores_dir = out / "stores"  # created by the first step that solves states, not before
     pool = StatePool(muscle)
     for path in seed_stores:
         pool.add_store(path)

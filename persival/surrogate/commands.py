@@ -6,6 +6,8 @@ from pathlib import Path
 
 import typer
 
+from persival.cli_errors import check_output_dir, fail, user_errors
+
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     """Attach this stage's commands to the main app and the benchmark group."""
@@ -26,12 +28,10 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         from persival.surrogate.surface_surrogate import SurfaceSurrogate
 
         console = Console()
-        try:
+        with user_errors(StoreError, out=out):
+            check_output_dir(out)
             surrogate = SurfaceSurrogate(muscle, degree).fit(store)
-        except (ValueError, FileNotFoundError, StoreError) as exc:
-            console.print(f"[red]error:[/red] {exc}")
-            raise typer.Exit(2) from None
-        surrogate.save(out)
+            surrogate.save(out)
         meta = surrogate.metadata
         console.print(f"fitted level-{meta['level']} grid ({meta['grid_points']} points) to {surrogate.n_nodes} {muscle} nodes + elbow angle; wrote {out}")
 
@@ -62,38 +62,19 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
 
         console = Console()
         if simulator not in ("arm", "analytic"):
-            console.print(f"[red]error:[/red] --simulator must be arm or analytic, got {simulator!r}")
-            raise typer.Exit(2)
-        try:
+            fail(f"--simulator must be arm or analytic, got {simulator!r}")
+        # No out=: a failure after some steps keeps their stores, which a rerun reuses.
+        # RuntimeError: failed FE states end the run with the command that retries them.
+        with user_errors(DesignError, StoreError, UnknownSimulatorError, RuntimeError):
+            check_output_dir(out)
             spec = build_spec(simulator, option, None, None, None, [], None)
             result = run_adaptive_campaign(
                 out, spec, max_points=max_points, muscle=muscle, degree=degree, initial_level=initial_level,
                 refinements_per_step=refinements, norm=norm, tol=tol, seed_stores=seed_store,
                 scheduler=None if scheduler == "local" else scheduler, progress=progress, log=console.print,
             )
-        except (ValueError, RuntimeError, DesignError, StoreError, UnknownSimulatorError, FileNotFoundError) as exc:
-            console.print(f"[red]error:[/red] {exc}")
-            raise typer.Exit(2) from None
         console.print(
             f"adaptive grid of {result.surrogate.grid.n_points} points after {len(result.steps)} steps "
             f"({result.stop_reason}); {result.simulated} states solved, {result.reused} reused; "
             f"{result.wall_time_s:.0f} s; wrote {out / 'surrogate'}"
-        )
-
-    @bench_app.command("sg")
-    def bench_sg(
-        dim: int = typer.Option(5, help="Input dimension (activations)."),
-        level: int = typer.Option(2, help="Regular sparse-grid level."),
-        degree: int = typer.Option(3, help="Odd B-spline degree."),
-        n_out: int = typer.Option(2809 * 3 + 1, help="Outputs per state (surface xyz + angle)."),
-        batch: int = typer.Option(1000, help="Large batch size."),
-        reps: int = typer.Option(300, help="Repetitions at batch 1 (after warmup)."),
-    ) -> None:
-        """Seconds per whole-surface state of the sparse-grid surrogate, batch 1 and large batch."""
-        # Heavy imports stay inside the command so that `persival --help` stays fast.
-        from persival.evaluate.bench_sparse_grid import print_benchmark, run_benchmark
-
-        print_benchmark(
-            run_benchmark(dim=dim, level=level, degree=degree, n_out=n_out, batch=batch,
-                          reps_single=reps)
         )

@@ -24,6 +24,8 @@ import scipy.linalg
 import scipy.sparse
 import scipy.sparse.linalg
 
+from persival.grid_points import level_index_points, regular_levels_indices
+
 __all__ = ["SparseGrid", "cardinal_bspline", "cardinal_bspline_dx", "DOMAIN_TOL"]
 
 #: Points this far outside [0, 1]^d are clipped silently (round-off from upstream scaling);
@@ -104,35 +106,6 @@ def cardinal_bspline_dx(y: np.ndarray, p: int, left: np.ndarray | None = None) -
 # --------------------------------------------------------------------------------------------
 # Grid construction helpers
 # --------------------------------------------------------------------------------------------
-def _regular_level_vectors(dim: int, n: int) -> list[tuple[int, ...]]:
-    """Level vectors of SG++'s regular boundary grid: sum_t max(l_t, 1) <= n + dim - 1.
-
-    Boundary level 0 counts as 1 (SG++'s ``boundaryLevel = 1``), so the boundary points ride
-    along with every subspace whose level is 1 in that direction (SPEC section 4).
-    Recursive enumeration instead of a product over (n+1)^dim candidates keeps large dim cheap.
-    """
-    out: list[tuple[int, ...]] = []
-
-    def rec(prefix: tuple[int, ...], budget: int) -> None:
-        remaining = dim - len(prefix)
-        if remaining == 0:
-            out.append(prefix)
-            return
-        for lev in range(0, n + 1):
-            cost = max(lev, 1)
-            if budget - cost >= remaining - 1:  # every later dim costs at least 1
-                rec(prefix + (lev,), budget - cost)
-
-    rec((), n + dim - 1)
-    return out
-
-
-def _indices_1d(level: int) -> np.ndarray:
-    if level == 0:
-        return np.array([0, 1], dtype=np.int64)
-    return np.arange(1, 2**level, 2, dtype=np.int64)
-
-
 def _check_levels_indices(levels: np.ndarray, indices: np.ndarray) -> None:
     if levels.ndim != 2 or levels.shape != indices.shape or levels.shape[0] == 0:
         raise ValueError(
@@ -174,17 +147,8 @@ class SparseGrid:
 
     def __init__(self, dim: int, level: int, degree: int = 3) -> None:
         dim, level, degree = _as_int(dim, "dim"), _as_int(level, "level"), _check_degree(degree)
-        if dim < 1:
-            raise ValueError(f"dim must be >= 1, got {dim}")
-        if level < 1:
-            raise ValueError(f"level must be >= 1 (SG++ boundary grids start at 1), got {level}")
-        blocks_l, blocks_i = [], []
-        for lv in _regular_level_vectors(dim, level):
-            grids = np.meshgrid(*[_indices_1d(lt) for lt in lv], indexing="ij")
-            idx = np.stack([g.ravel() for g in grids], axis=1)
-            blocks_i.append(idx)
-            blocks_l.append(np.broadcast_to(np.array(lv, dtype=np.int64), idx.shape))
-        self._init(np.concatenate(blocks_l), np.concatenate(blocks_i), degree, level)
+        levels, indices = regular_levels_indices(dim, level)
+        self._init(levels, indices, degree, level)
 
     @classmethod
     def from_levels_indices(
@@ -211,8 +175,7 @@ class SparseGrid:
         self.degree = degree
         self.level = level
         self.dim = int(self.levels.shape[1])
-        # Level 0 has h = 1 (SG++ shifts 1 << 0 = 1), so x = i * 2^-l holds uniformly.
-        self.points = self.indices * np.ldexp(1.0, -self.levels)
+        self.points = level_index_points(self.levels, self.indices)
         self.points.setflags(write=False)
 
         # Distinct 1-D functions over all dimensions: the evaluation table is built for these
@@ -420,6 +383,19 @@ class SparseGrid:
         coef = self._factorize()(f2 - offset if center else f2)
         self._set_coefficients(coef, scalar, offset)
         return self
+
+    def select_outputs(self, columns) -> SparseGrid:
+        """The same grid interpolating only some outputs (no refit: their surpluses are copied).
+
+        An int gives a scalar interpolant, a sequence a vector one. Evaluating one output of a
+        wide fit this way reads one column of the coefficient matrix instead of all of them.
+        """
+        self._require_fit()
+        scalar = np.ndim(columns) == 0
+        cols = np.atleast_1d(np.asarray(columns, dtype=np.int64))
+        sub = SparseGrid.from_levels_indices(self.levels, self.indices, self.degree)
+        sub._set_coefficients(self._coef[:, cols], scalar, None if self._offset is None else self._offset[cols])
+        return sub
 
     def _set_coefficients(self, coef: np.ndarray, scalar: bool, offset: np.ndarray | None) -> None:
         self._coef = np.ascontiguousarray(coef, dtype=np.float64)

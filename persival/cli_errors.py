@@ -1,0 +1,120 @@
+"""The command line's one error path.
+
+A *user* error (a bad value, a missing or foreign file, a file where a folder belongs) is one
+line ``error: ...`` on stderr and exit code 2, with nothing left behind; an *internal* error
+(a bug) is one line too, but exit code 1 and a hint: ``persival --debug ...`` re-raises it with
+its traceback. Every stage's ``commands.py`` uses :func:`user_errors` and :func:`fail`; the main
+app is a :class:`ErrorReportingGroup`.
+"""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import click
+import typer
+from typer.core import TyperGroup
+
+__all__ = ["USER_ERRORS", "ErrorReportingGroup", "fail", "user_errors", "check_output_dir", "check_output_file"]
+
+#: What counts as a user error everywhere; stages add their own (StoreError, ...) per call.
+USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, FileNotFoundError, NotADirectoryError,
+                                                IsADirectoryError, FileExistsError)
+
+# typer >= 0.20 has its own Exit / Abort beside click's; a command may raise either.
+_EXITS = tuple({click.exceptions.Exit, getattr(typer, "Exit", click.exceptions.Exit)})
+_PASS_THROUGH = _EXITS + tuple({click.exceptions.Abort, getattr(typer, "Abort", click.exceptions.Abort)}) + (click.ClickException,)
+
+EXIT_USER_ERROR = 2
+EXIT_INTERNAL_ERROR = 1
+
+
+def _one_line(message: str) -> str:
+    # Pydantic and some OS errors span several lines; the contract is one line.
+    return "; ".join(part.strip() for part in str(message).splitlines() if part.strip())
+
+
+def _message(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
+        return f"{exc.filename}: {exc.strerror.lower()}"  # not "[Errno 2] No such file ..."
+    if isinstance(exc, KeyError) and type(exc).__str__ is KeyError.__str__ and exc.args:
+        return str(exc.args[0])  # KeyError quotes its message
+    return str(exc) or type(exc).__name__
+
+
+def fail(message: str) -> None:
+    """Print ``error: message`` on stderr and exit with code 2."""
+    typer.echo(f"{typer.style('error:', fg='red', bold=True)} {_one_line(message)}", err=True)
+    raise typer.Exit(EXIT_USER_ERROR)
+
+
+@contextmanager
+def user_errors(*extra: type[BaseException], out: Path | None = None) -> Iterator[None]:
+    """Turn user errors raised inside the block into :func:`fail`.
+
+    ``extra``: the stage's own user-error classes (e.g. StoreError, which is a RuntimeError).
+    ``out``: an output path the block may create; if it did not exist before, it is removed
+    again when the block ends in a user error or a non-zero exit, so that a rejected command
+    leaves nothing behind. An internal error or Ctrl-C keeps it: partial results help debugging
+    and a campaign store can be resumed.
+    """
+    created = out is not None and not Path(out).exists()
+    try:
+        yield
+    except _EXITS as exc:
+        if created and exc.exit_code:
+            _remove(Path(out))
+        raise
+    except USER_ERRORS + extra as exc:
+        if created:
+            _remove(Path(out))
+        fail(_message(exc))
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    elif path.exists() or path.is_symlink():
+        path.unlink()
+
+
+def check_output_dir(path: Path, what: str = "--out") -> Path:
+    """``path`` can become an output folder: it is one already, or nothing is there yet."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise NotADirectoryError(f"{what} {path} is a file, not a folder")
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise NotADirectoryError(f"{what} {path}: {parent} is a file, not a folder")
+            break
+    return path
+
+
+def check_output_file(path: Path, what: str = "--out") -> Path:
+    """``path`` can become an output file: not a folder, and its parent is not a file."""
+    path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(f"{what} {path} is a folder, not a file")
+    check_output_dir(path.parent, what)
+    return path
+
+
+class ErrorReportingGroup(TyperGroup):
+    """The main app's group: an exception that is not a user error becomes one line and exit 1,
+    unless ``--debug`` was given, which lets it through with its traceback."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except _PASS_THROUGH:
+            raise
+        except Exception as exc:
+            if ctx.params.get("debug"):
+                raise
+            typer.echo(f"{typer.style('internal error:', fg='red', bold=True)} {type(exc).__name__}: "
+                       f"{_one_line(_message(exc))} (run `persival --debug ...` for the traceback)", err=True)
+            raise typer.Exit(EXIT_INTERNAL_ERROR) from None
