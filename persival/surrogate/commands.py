@@ -33,22 +33,31 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             surrogate = SurfaceSurrogate(muscle, degree).fit(store)
             surrogate.save(out)
         meta = surrogate.metadata
-        console.print(f"fitted level-{meta['level']} grid ({meta['grid_points']} points) to {surrogate.n_nodes} {muscle} nodes + elbow angle; wrote {out}")
+        console.print(f"fitted level-{meta['level']} grid ({meta['grid_points']} points) to {surrogate.n_nodes} {muscle} "
+                      f"nodes + elbow angle; wrote {out}")
 
     @surrogate_app.command("adapt")
     def adapt(
-        out: Path = typer.Option(..., "--out", help="Output directory: stores/ (one campaign store per step), surrogate/, adaptive.json."),
+        out: Path = typer.Option(
+            ..., "--out", help="Output directory: stores/ (one campaign store per step), surrogate/, adaptive.json."),
         max_points: int = typer.Option(..., "--max-points", min=1, help="FE budget: grid points of the final grid."),
         simulator: str = typer.Option("arm", "--simulator", help="Simulator kind: arm or analytic."),
         option: list[str] = typer.Option([], "--option", help="Simulator option KEY=VALUE (e.g. profile=quick), repeatable."),
-        seed_store: list[Path] = typer.Option([], "--seed-store", help="Campaign store whose done states are reused when the grid asks for their points (same model), repeatable."),
-        initial_level: int = typer.Option(0, "--initial-level", min=0, help="Start grid: 0 = the 32 corners, L >= 1 = regular level L."),
-        refinements: int = typer.Option(2, "--refinements-per-step", min=1, help="Points refined per step (each brings its children and their ancestors)."),
+        seed_store: list[Path] = typer.Option(
+            [], "--seed-store", help="Campaign store whose done states are reused when the grid asks for their points "
+            "(same model), repeatable."),
+        initial_level: int = typer.Option(
+            0, "--initial-level", min=0, help="Start grid: 0 = the 32 corners, L >= 1 = regular level L."),
+        refinements: int = typer.Option(
+            2, "--refinements-per-step", min=1, help="Points refined per step (each brings its children and their ancestors)."),
         norm: str = typer.Option("max", "--norm", help="Refinement indicator over a point's surplus row: max or l2."),
-        tol: float = typer.Option(0.0, "--tol", min=0.0, help="Stop when no refinable point's indicator (mm or deg) reaches this."),
+        tol: float = typer.Option(
+            0.0, "--tol", min=0.0, help="Stop when no refinable point's indicator (mm or deg) reaches this."),
         muscle: str = typer.Option("biceps", "--muscle", help="Surface to interpolate."),
         degree: int = typer.Option(3, "--degree", help="Odd B-spline degree."),
-        scheduler: str = typer.Option("inline", "--scheduler", help="inline (default: the simulator stays warm between steps), a dask address, or 'local' for a LocalCluster per step."),
+        scheduler: str = typer.Option(
+            "inline", "--scheduler", help="inline (default: the simulator stays warm between steps), a dask address, "
+            "or 'local' for a LocalCluster per step."),
         progress: bool = typer.Option(True, "--progress/--no-progress", help="Show progress bars."),
     ) -> None:
         """Grow a spatially adaptive sparse grid: refine where surpluses are largest, solve only the new points."""
