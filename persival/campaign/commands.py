@@ -7,65 +7,11 @@ from pathlib import Path
 
 import typer
 
+from persival.campaign.options import build_design, build_spec
 from persival.cli_errors import check_output_dir, user_errors
 
 _SIMULATOR_HELP = ("Simulator kind: arm (the built-in FE model), analytic (closed-form test model) "
                    "or external.")
-
-
-def _parse_value(text: str):
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError:
-        return text
-
-
-def build_design(design: str | None, level: int, n_random: int, seed: int):
-    from persival.campaign.design import Design
-
-    if design in (None, "sparse-grid"):
-        return Design.sparse_grid(level)
-    if design == "random":
-        return Design.random(n_random, seed)
-    return Design.from_file(design)
-
-
-def build_spec(simulator: str, options: list[str], options_file: Path | None, command: str | None,
-               reference: Path | None, surfaces: list[str], result_file: str | None):
-    from persival.campaign.importers import parse_selector
-    from persival.campaign.simulator import SimulatorSpec
-
-    opts: dict = {}
-    if options_file is not None:
-        try:
-            opts.update(json.loads(Path(options_file).read_text()))
-        except (OSError, json.JSONDecodeError) as exc:
-            raise ValueError(f"--options {options_file}: {exc}") from None
-    for item in options:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise ValueError(f"--option expects KEY=VALUE, got {item!r}")
-        opts[key] = _parse_value(value)
-    external = {"command": command, "reference": str(reference.resolve()) if reference else None,
-                "result": result_file}
-    if simulator != "external" and (any(external.values()) or surfaces):
-        raise ValueError("--command, --reference, --surface and --result-file belong to "
-                         "--simulator external")
-    if simulator == "external":
-        opts.update({k: v for k, v in external.items() if v})
-        if surfaces:
-            sel = {}
-            for item in surfaces:
-                name, sep, selector = item.partition("=")
-                if not sep:
-                    raise ValueError(f"--surface expects NAME=SELECTOR, got {item!r}")
-                sel[name] = parse_selector(selector)
-            opts["surfaces"] = sel
-        missing = [k for k in ("command", "reference", "surfaces") if not opts.get(k)]
-        if missing:
-            raise ValueError(f"--simulator external needs {', '.join(missing)} "
-                             "(--command, --reference, --surface NAME=SELECTOR, or --options FILE)")
-    return SimulatorSpec(simulator, opts)
 
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:

@@ -63,8 +63,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         """Grow a spatially adaptive sparse grid: refine where surpluses are largest, solve only the new points."""
         from rich.console import Console
 
-        from persival.campaign.commands import build_spec
         from persival.campaign.design import DesignError
+        from persival.campaign.options import build_spec
         from persival.campaign.simulator import UnknownSimulatorError
         from persival.campaign.store import StoreError
         from persival.surrogate.adaptive_campaign import run_adaptive_campaign
