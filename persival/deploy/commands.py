@@ -1,0 +1,89 @@
+"""CLI commands of the deploy stage's server: `persival serve` and `persival bench serve`."""
+
+from __future__ import annotations
+
+import ipaddress
+from pathlib import Path
+
+import typer
+
+
+def _is_loopback(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return host == "localhost"
+
+
+def _register_serve(app: typer.Typer) -> None:
+    @app.command("serve")
+    def serve(
+        artifacts: Path = typer.Option(..., "--artifacts", help="Export folder (metadata.json + ONNX models)."),
+        host: str = typer.Option("127.0.0.1", "--host", help="Address to bind; loopback unless you mean to share it."),
+        port: int = typer.Option(8000, "--port", min=0, max=65535, help="TCP port."),
+        log_level: str = typer.Option("info", "--log-level", help="uvicorn log level."),
+    ) -> None:
+        """Serve the web viewer, the exported models and the inference API (REST + WebSocket)."""
+        import uvicorn
+        from rich.console import Console
+
+        from persival.deploy.artifacts import ArtifactError
+        from persival.deploy.server import WEB_DIST, create_app
+
+        console = Console(stderr=True)
+        try:
+            web_app = create_app(artifacts)
+        except ArtifactError as exc:
+            console.print(f"[red]error:[/red] {exc}")
+            raise typer.Exit(2) from None
+        if not _is_loopback(host):
+            console.print(f"[yellow]warning:[/yellow] binding {host}: the server is reachable from other machines")
+        if not (WEB_DIST / "index.html").is_file():
+            console.print("[yellow]warning:[/yellow] the web viewer is not built (`make web`); serving the API only")
+        console.print(f"PerSival viewer: http://{host}:{port}/  (artifacts {Path(artifacts).resolve()})")
+        # ws_max_size bounds a WebSocket message before it is buffered; the app bounds it again.
+        uvicorn.run(web_app, host=host, port=port, log_level=log_level, ws_max_size=65536,
+                    limit_concurrency=256, timeout_keep_alive=5, h11_max_incomplete_event_size=16384)
+
+
+def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+    """Attach `serve` to the main app and `serve` to the benchmark group."""
+    _register_serve(app)
+
+    @bench_app.command("serve")
+    def bench_serve(
+        artifacts: Path = typer.Option(..., "--artifacts", help="Export folder to serve."),
+        clients: int = typer.Option(8, "--clients", min=1, max=64, help="Concurrent WebSocket clients."),
+        rate: float = typer.Option(60.0, "--rate", min=1, max=240, help="States per second per client."),
+        duration: float = typer.Option(10.0, "--duration", min=1, max=120, help="Seconds of load."),
+        bad_every: int = typer.Option(25, "--bad-every", min=0, help="Every k-th request is malformed (0: none)."),
+        json_out: Path = typer.Option(None, "--json", help="Also write the figures to this file."),
+    ) -> None:
+        """Load-test the server on loopback: N WebSocket clients at M states/s; latency, throughput, errors."""
+        import json
+
+        from rich.console import Console
+        from rich.table import Table
+
+        from persival.deploy.bench_serve import run_load_test
+
+        console = Console()
+        try:
+            summary = run_load_test(artifacts, clients, rate, duration, bad_every).summary()
+        except (ValueError, RuntimeError) as exc:
+            console.print(f"[red]error:[/red] {exc}")
+            raise typer.Exit(2) from None
+        table = Table(title=f"persival serve under load: {clients} clients x {rate:g} states/s, {duration:g} s")
+        table.add_column("what")
+        table.add_column("value", justify="right")
+        for key in ("states", "states_per_s", "p50_ms", "p99_ms", "max_ms", "bad_sent", "bad_refused",
+                    "errors", "server_peak_rss_mb"):
+            value = summary[key]
+            table.add_row(key, f"{value:.3g}" if isinstance(value, float) else str(value))
+        console.print(table)
+        for line in summary["first_errors"]:
+            console.print(f"[red]{line}[/red]")
+        if json_out:
+            json_out.write_text(json.dumps(summary, indent=2))
+        if summary["errors"]:
+            raise typer.Exit(1)

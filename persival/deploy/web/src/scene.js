@@ -1,0 +1,172 @@
+// The three.js scene: bones from metadata.skeleton (the forearm group turns about the hinge),
+// the five muscles as one indexed mesh whose buffers the model overwrites in place each frame.
+import * as THREE from 'three';
+import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
+import { MuscleBuffers } from './mesh.js';
+
+function boneGeometry(bone) {
+  const g = new THREE.BufferGeometry();
+  g.setAttribute('position', new THREE.Float32BufferAttribute(bone.points.flat(), 3));
+  g.setIndex(bone.triangles.flat());
+  g.computeVertexNormals();
+  return g;
+}
+
+function lights(scene) {
+  scene.add(new THREE.HemisphereLight(0xdfe8ff, 0x1a1510, 1.1));
+  const key = new THREE.DirectionalLight(0xffffff, 2.2);
+  key.position.set(300, 400, 500);
+  const rim = new THREE.DirectionalLight(0x9fc8ff, 0.9);
+  rim.position.set(-400, 150, -300);
+  scene.add(key, rim);
+}
+
+export class ArmScene {
+  constructor(canvas, meta) {
+    this.renderer = new THREE.WebGLRenderer({ canvas, antialias: new URLSearchParams(location.search).get('aa') === '1', alpha: true, preserveDrawingBuffer: true });
+    this.maxScale = Math.min(window.devicePixelRatio, 2);
+    this.renderScale = this.maxScale;
+    this.renderer.setPixelRatio(this.renderScale);
+    this.scene = new THREE.Scene();
+    this.scene.background = new THREE.Color(0x0f1318);
+    this.camera = new THREE.PerspectiveCamera(32, 1, 1, 10000);
+    lights(this.scene);
+    // The model is z-up in mm (shoulder at the top); three.js is y-up: turn the arm once.
+    this.root = new THREE.Group();
+    this.root.rotation.x = -Math.PI / 2;
+    this.scene.add(this.root);
+    this.addBones(meta.skeleton);
+    this.addMuscles(meta);
+    this.frame(meta);
+    this.camera.aspect = window.innerWidth / window.innerHeight;
+    this.placeCamera();
+    this.controls = new OrbitControls(this.camera, canvas);
+    this.controls.target.copy(this.centre);
+    this.controls.enableDamping = true;
+    this.resize();
+    window.addEventListener('resize', () => this.resize());
+  }
+
+  addBones(skeleton) {
+    const material = new THREE.MeshPhongMaterial({ color: 0xe9e1cf, shininess: 12, specular: 0x222222 });
+    const { centre, axis } = skeleton.hinge;
+    this.hingeAxis = new THREE.Vector3(...axis).normalize();
+    // centre + R (p - centre): the group sits at the centre, its children are shifted by -centre.
+    this.forearm = new THREE.Group();
+    this.forearm.position.set(...centre);
+    this.root.add(this.forearm);
+    for (const bone of skeleton.bones) {
+      const mesh = new THREE.Mesh(boneGeometry(bone), material);
+      if (bone.segment === 'forearm') {
+        mesh.position.set(-centre[0], -centre[1], -centre[2]);
+        this.forearm.add(mesh);
+      } else {
+        this.root.add(mesh);
+      }
+    }
+  }
+
+  addMuscles(meta) {
+    const reference = new Float32Array(meta.reference_points.flat());
+    const index = new Uint32Array(meta.triangles.flat());
+    this.buffers = new MuscleBuffers(reference, index);
+    const g = new THREE.BufferGeometry();
+    this.attr = {
+      position: new THREE.BufferAttribute(this.buffers.positions, 3).setUsage(THREE.DynamicDrawUsage),
+      normal: new THREE.BufferAttribute(this.buffers.normals, 3).setUsage(THREE.DynamicDrawUsage),
+      color: new THREE.BufferAttribute(this.buffers.colors, 3).setUsage(THREE.DynamicDrawUsage),
+    };
+    for (const [k, a] of Object.entries(this.attr)) g.setAttribute(k, a);
+    g.setIndex(new THREE.BufferAttribute(index, 1));
+    this.buffers.computeNormals();
+    g.computeBoundingSphere();
+    const material = new THREE.MeshPhongMaterial({ vertexColors: true, shininess: 40, specular: 0x333333 });
+    this.muscles = new THREE.Mesh(g, material);
+    this.muscles.frustumCulled = false; // positions change every frame; no bounding-sphere refresh
+    this.root.add(this.muscles);
+  }
+
+  frame(meta) {
+    // Frame the arm from mid-range to full flexion (where it spends its time; the straight arm
+    // reaches below). setFromObject reads world matrices, which three.js updates only when drawing.
+    const [lo, hi] = meta.models.activation_angle.range_deg;
+    const box = new THREE.Box3();
+    for (const deg of [(lo + hi) / 2, hi]) {
+      this.setElbowAngle(deg);
+      this.root.updateMatrixWorld(true);
+      box.union(new THREE.Box3().setFromObject(this.root));
+    }
+    this.setElbowAngle(0);
+    this.centre = box.getCenter(new THREE.Vector3());
+    this.halfSize = box.getSize(new THREE.Vector3()).multiplyScalar(0.5);
+    this.placeCamera();
+  }
+
+  placeCamera() {
+    const t = Math.tan(THREE.MathUtils.degToRad(this.camera.fov / 2));
+    const h = this.halfSize;
+    // Fit height and width (the window's aspect), plus the depth in front of the centre; 15 % margin.
+    const dist = 1.15 * Math.max(h.y / t, h.x / (t * Math.max(this.camera.aspect * 0.75, 0.5))) + h.z;
+    const dir = new THREE.Vector3(0.3, 0.15, 1).normalize(); // a little from the front and above
+    this.camera.position.copy(this.centre).addScaledVector(dir, dist);
+    this.camera.near = dist / 20;
+    this.camera.far = dist * 10;
+    this.camera.lookAt(this.centre);
+  }
+
+  setElbowAngle(deg) {
+    this.forearm.quaternion.setFromAxisAngle(this.hingeAxis, THREE.MathUtils.degToRad(deg));
+  }
+
+  setPositions(positions) {
+    this.buffers.update(positions);
+    for (const a of Object.values(this.attr)) a.needsUpdate = true;
+  }
+
+  async enterAR(session) {
+    const r = this.renderer, root = this.root, background = this.scene.background;
+    const saved = { position: root.position.clone(), scale: root.scale.clone() };
+    r.xr.enabled = true;
+    r.xr.setReferenceSpaceType('local');
+    this.scene.background = null; // the camera image shows through
+    // mm -> m, the arm's centre 0.6 m in front of the viewer
+    root.scale.setScalar(0.001);
+    root.position.copy(this.centre).multiplyScalar(-0.001).add(new THREE.Vector3(0, 0, -0.6));
+    await r.xr.setSession(session);
+    session.addEventListener('end', () => {
+      r.xr.enabled = false;
+      this.scene.background = background;
+      root.position.copy(saved.position);
+      root.scale.copy(saved.scale);
+    });
+  }
+
+  // Dynamic resolution: the drawing buffer shrinks (down to half) while the frame rate is below
+  // target and grows back when there is headroom; software renderers are fill-rate bound.
+  adaptResolution(fps, target = 60) {
+    let next = this.renderScale;
+    if (fps < target) next = Math.max(0.5 * this.maxScale, this.renderScale * 0.85);
+    else if (fps > 1.6 * target) next = Math.min(this.maxScale, this.renderScale * 1.1);
+    if (Math.abs(next - this.renderScale) > 1e-3) {
+      this.renderScale = next;
+      this.renderer.setPixelRatio(next);
+      this.resize();
+    }
+  }
+
+  resize() {
+    const w = window.innerWidth, h = window.innerHeight;
+    this.renderer.setSize(w, h, false);
+    this.camera.aspect = w / h;
+    // Centre the arm in the part of the window the control panel leaves free.
+    const panel = w > 720 ? 150 : 0;
+    if (panel && !this.renderer.xr.isPresenting) this.camera.setViewOffset(w, h, -panel, 0, w, h);
+    else this.camera.clearViewOffset();
+    this.camera.updateProjectionMatrix();
+  }
+
+  render() {
+    this.controls.update();
+    this.renderer.render(this.scene, this.camera);
+  }
+}
