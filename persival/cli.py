@@ -32,6 +32,7 @@ def _register() -> None:
     # Imported here so that `persival --help` stays fast and each stage stays independent.
     from persival import run_command
     from persival.campaign import commands as campaign_commands
+    from persival.deploy import commands as deploy_commands
     from persival.evaluate import commands as evaluate_commands
     from persival.model import commands as model_commands
     from persival.surrogate import commands as surrogate_commands
@@ -41,6 +42,7 @@ def _register() -> None:
     campaign_commands.register(app, bench_app)
     surrogate_commands.register(app, bench_app)
     evaluate_commands.register(app, bench_app)
+    deploy_commands.register(app, bench_app)
 
 
 _register()
