@@ -52,7 +52,7 @@ def test_adaptive_solves_every_point_once_interpolates_and_resumes(tmp_path):
     assert len({p.tobytes() for p in points}) == len(points)
     assert {p.tobytes() for p in points} == {p.tobytes() for p in np.asarray(grid.points)}
     # the surrogate interpolates the FE states at its points
-    predicted, _ = result.surrogate.predict(points)
+    predicted = result.surrogate.predict(points)
     assert np.abs(predicted - positions).max() < 1e-8
     # refinement went below level 1 somewhere: adaptive, not regular
     assert grid.levels.max() >= 2

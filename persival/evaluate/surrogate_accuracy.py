@@ -69,7 +69,7 @@ def surrogate_errors(surrogate: SurfaceSurrogate, test: HeldOutStates) -> dict[s
         )
     if surrogate.n_nodes != test.positions.shape[1]:
         raise ValueError(f"surrogate has {surrogate.n_nodes} surface nodes, the test states {test.positions.shape[1]}")
-    return _predict_errors(surrogate.predict, test)
+    return _predict_errors(surrogate.predict_with_angle, test)
 
 
 def refinement_path(surrogate: SurfaceSurrogate) -> list[tuple[int, SurfaceSurrogate]]:
@@ -100,7 +100,7 @@ def accuracy_report(surrogates: dict[str, str | Path], test_store: str | Path) -
                        **summarize(surrogate_errors(surrogate, test))}
         path = refinement_path(surrogate)
         if path:
-            paths[label] = [{"fe_states": n, **summarize(_predict_errors(s.predict, test))} for n, s in path]
+            paths[label] = [{"fe_states": n, **summarize(_predict_errors(s.predict_with_angle, test))} for n, s in path]
     return {"test_store": str(test_store), "test_states": len(test.angles), "surrogates": rows, "refinement": paths}
 
 

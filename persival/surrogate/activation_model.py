@@ -58,21 +58,31 @@ class AngleActivationModel:
             values.append(a)
             if progress is not None:
                 progress(1, len(knots))
-        knots, values = cls._bisect(problem, knots, values, tolerance, max_knots)
+        knots, values, jumps = cls._bisect(problem, knots, values, tolerance, max_knots)
+        notes += [{"angle_deg": t, "jump": j, "note": "alpha_opt jumps here (the branch ends): the map "
+                   "interpolates linearly across 1e-3 deg"} for t, j in jumps]
         meta = {"reachable_range_deg": list(reach), "tolerance": tolerance, "knots": len(knots),
                 "effort_weight": problem.weight}
         return cls(knots, values, notes, meta)
 
     @staticmethod
-    def _bisect(problem, knots, values, tolerance, max_knots):
-        """Insert midpoints until the solver agrees with the interpolation everywhere."""
+    def _bisect(problem, knots, values, tolerance, max_knots, min_width=1e-3):
+        """Insert midpoints until the solver agrees with the interpolation everywhere.
+
+        An interval narrower than ``min_width`` deg that still disagrees holds a jump of
+        alpha_opt; it is reported, not split further.
+        """
         knots, values = list(knots), [np.asarray(v) for v in values]
-        pending = list(range(len(knots) - 1))
+        pending, jumps = list(range(len(knots) - 1)), []
         while pending and len(knots) < max_knots:
             inserts = []
             for i in pending:
                 mid = 0.5 * (knots[i] + knots[i + 1])
                 guess = 0.5 * (values[i] + values[i + 1])
+                if knots[i + 1] - knots[i] < min_width:
+                    if np.abs(values[i + 1] - values[i]).max() > tolerance:
+                        jumps.append((float(mid), float(np.abs(values[i + 1] - values[i]).max())))
+                    continue
                 a, _ = problem.solve_from(mid, guess)
                 if np.abs(a - guess).max() > tolerance:
                     inserts.append((i, mid, a))
@@ -81,7 +91,7 @@ class AngleActivationModel:
                 values.insert(i + 1, a)
             # the two halves of every split interval are checked again
             pending = sorted({j for n, (i, _, _) in enumerate(sorted(inserts)) for j in (i + n, i + n + 1)})
-        return np.array(knots), np.array(values)
+        return np.array(knots), np.array(values), jumps
 
     # ------------------------------------------------------------------ evaluation
     def predict(self, theta_deg) -> np.ndarray:

@@ -36,7 +36,7 @@ class Surrogate(Protocol):
 
 
 def _kinds() -> dict:
-    from persival.surrogate.networks import NetworkSurrogate
+    from persival.surrogate.network_surrogate import NetworkSurrogate
     from persival.surrogate.surface_surrogate import SurfaceSurrogate
 
     return {"sparse-grid": SurfaceSurrogate, "network": NetworkSurrogate}

@@ -94,6 +94,7 @@ class Dataset:
     elbow_angles: np.ndarray  # (n,) deg
     surfaces: Surfaces
     source: dict = field(default_factory=dict)  # simulator, profile, states, label, model_hash, store
+    target_deg: np.ndarray | None = None  # (n,) training data: the angle a sample solves, NaN for random alpha
 
     def __post_init__(self) -> None:
         self.activations = np.asarray(self.activations, dtype=np.float64)
@@ -117,7 +118,8 @@ class Dataset:
     def subset(self, rows) -> Dataset:
         rows = np.asarray(rows)
         return Dataset(self.activations[rows], self.positions[rows], self.elbow_angles[rows], self.surfaces,
-                       {**self.source, "states": int(len(self.activations[rows]))})
+                       {**self.source, "states": int(len(self.activations[rows]))},
+                       None if self.target_deg is None else self.target_deg[rows])
 
     def digest(self) -> str:
         """sha256 of the inputs and outputs (provenance of anything trained on it)."""

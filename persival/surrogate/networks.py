@@ -1,0 +1,201 @@
+"""The network architectures of SPEC 6: the paper's exponential net and the POD net.
+
+Both map activations (b, 5) to *normalized* targets while training, and both can be folded
+into one plain graph ``alpha -> positions (b, N, 3) mm [, elbow angle (b, 1) deg]`` for
+deployment (:meth:`deployable`), with every normalization and the reference coordinates X
+moved into the last layer's weights and bias, as the paper does.
+
+- :class:`PaperNet`: one dense net per coordinate (x, y, z), 5 -> 5 hidden layers -> N, widths
+  ``w(s) = a e^(b s) + c`` (:func:`paper_widths`), trained on displacements u = x - X.
+- :class:`PodNet` (beyond the paper): u ~ u_mean + Phi c with Phi the leading POD modes of the
+  training displacements; a small net alpha -> (c, elbow angle); Phi is the last linear layer.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+from torch import nn
+
+__all__ = ["ACTIVATIONS", "paper_widths", "PaperNet", "PodNet", "pod_basis", "count_parameters"]
+
+ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "silu": nn.SiLU, "elu": nn.ELU}
+
+
+def paper_widths(n_in: int, n_mid: int, n_out: int, n_hidden: int = 5) -> list[int]:
+    """SPEC 6: w(s) = a e^(b s) + c through w(0) = n_in, w(1/2) = n_mid, w(1) = n_out, at s = n/(n_hidden+1)."""
+    if not n_in < n_mid < n_out:
+        raise ValueError(f"need n_in < n_mid < n_out, got {n_in}, {n_mid}, {n_out}")
+    q = (n_out - n_mid) / (n_mid - n_in)
+    a = (n_mid - n_in) / (q - 1.0) if q != 1.0 else None
+    if a is None:  # q = 1: the exponential degenerates to a straight line
+        return [round(n_in + (n_out - n_in) * n / (n_hidden + 1)) for n in range(1, n_hidden + 1)]
+    b, c = 2.0 * math.log(q), n_in - a
+    return [round(a * math.exp(b * n / (n_hidden + 1)) + c) for n in range(1, n_hidden + 1)]
+
+
+def _mlp(widths: list[int], activation: str) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for k in range(len(widths) - 1):
+        layers.append(nn.Linear(widths[k], widths[k + 1]))
+        if k < len(widths) - 2:
+            layers.append(ACTIVATIONS[activation]())
+    return nn.Sequential(*layers)
+
+
+def count_parameters(module: nn.Module) -> int:
+    return sum(p.numel() for p in module.parameters())
+
+
+class PaperNet(nn.Module):
+    """Three per-coordinate nets; forward gives normalized displacements (b, 3, N)."""
+
+    def __init__(self, n_nodes: int, activation: str = "relu", n_mid: int = 700, n_hidden: int = 5) -> None:
+        super().__init__()
+        self.config = {"arch": "paper", "n_nodes": n_nodes, "activation": activation, "n_mid": n_mid,
+                       "n_hidden": n_hidden}
+        self.widths = paper_widths(5, n_mid, n_nodes, n_hidden)
+        self.nets = nn.ModuleList([_mlp([5, *self.widths, n_nodes], activation) for _ in range(3)])
+        self.register_buffer("scale", torch.ones(()))  # displacement scale (mm) of the training set
+
+    def forward(self, alpha: torch.Tensor) -> torch.Tensor:
+        return torch.stack([net(alpha) for net in self.nets], dim=1)
+
+    def fit_normalization(self, u: np.ndarray, angles: np.ndarray, pod=None) -> None:
+        self.scale.fill_(float(np.std(u) + 1e-12))
+
+    def targets(self, u: np.ndarray, angles: np.ndarray) -> np.ndarray:
+        """What the net is trained to output: displacements / scale, per coordinate (n, 3, N)."""
+        return np.ascontiguousarray(np.transpose(u, (0, 2, 1)) / float(self.scale))
+
+    def physical(self, out: torch.Tensor) -> torch.Tensor:
+        return out  # the paper's loss: MSE of (scaled) displacements
+
+    def displacements(self, out: torch.Tensor) -> torch.Tensor:
+        return out.transpose(1, 2) * self.scale
+
+    def deployable(self, reference: np.ndarray) -> nn.Module:
+        """The combined graph: one input, the three last layers concatenated, X in the bias."""
+        return _CombinedPaperNet(self, reference, float(self.scale))
+
+
+class _CombinedPaperNet(nn.Module):
+    def __init__(self, net: PaperNet, reference: np.ndarray, scale: float) -> None:
+        super().__init__()
+        self.hidden = nn.ModuleList([n[:-1] for n in net.nets])
+        last = [n[-1] for n in net.nets]
+        x = torch.as_tensor(np.asarray(reference, dtype=np.float32))  # (N, 3)
+        self.out = nn.ModuleList()
+        for k, layer in enumerate(last):  # u = scale * (W h + b); x = X + u
+            lin = nn.Linear(layer.in_features, layer.out_features)
+            with torch.no_grad():
+                lin.weight.copy_(layer.weight * scale)
+                lin.bias.copy_(layer.bias * scale + x[:, k])
+            self.out.append(lin)
+
+    def forward(self, alpha):
+        coords = [out(h(alpha)) for h, out in zip(self.hidden, self.out)]
+        return torch.stack(coords, dim=2)  # (b, N, 3): interleaved xyz
+
+
+def pod_basis(displacements: np.ndarray, rank: int | None = None, energy: float = 0.99999):
+    """Mean (3N,), the leading POD modes (r, 3N) of (n, N, 3) displacements, and all singular values.
+
+    ``rank`` given: that many modes; else the smallest rank keeping ``energy`` of the
+    fluctuation's squared norm.
+    """
+    u = np.asarray(displacements, dtype=np.float64).reshape(len(displacements), -1)
+    mean = u.mean(axis=0)
+    # the n x n Gram matrix (n samples << 3N outputs) instead of an SVD of the n x 3N snapshots
+    gram = (u - mean) @ (u - mean).T
+    w, v = np.linalg.eigh(gram)
+    w, v = np.clip(w[::-1], 0.0, None), v[:, ::-1]
+    s = np.sqrt(w)
+    if rank is None:
+        captured = np.cumsum(w) / max(np.sum(w), 1e-300)
+        rank = int(np.searchsorted(captured, energy) + 1)
+    rank = int(min(rank, int(np.sum(s > s[0] * 1e-10))))
+    basis = (v[:, :rank].T @ (u - mean)) / s[:rank, None]
+    return mean, basis, s
+
+
+class PodNet(nn.Module):
+    """alpha -> normalized (POD coefficients, elbow angle); the basis is applied outside training."""
+
+    def __init__(self, n_nodes: int, rank: int, hidden=(64, 64, 64), activation: str = "silu") -> None:
+        super().__init__()
+        self.config = {"arch": "pod", "n_nodes": n_nodes, "rank": rank, "hidden": list(hidden),
+                       "activation": activation}
+        self.net = _mlp([5, *hidden, rank + 1], activation)
+        self.register_buffer("mean", torch.zeros(3 * n_nodes))
+        self.register_buffer("basis", torch.zeros(rank, 3 * n_nodes))  # orthonormal rows
+        self.register_buffer("coef_scale", torch.ones(rank))  # std of each coefficient
+        self.register_buffer("angle_shift", torch.zeros(1))
+        self.register_buffer("angle_scale", torch.ones(1))
+
+    def fit_normalization(self, u: np.ndarray, angles: np.ndarray, pod=None) -> None:
+        """The POD of the training displacements (or ``pod`` = (mean, basis) computed already)
+        and the scales of the coefficients and the angle."""
+        mean, basis = pod if pod is not None else pod_basis(u, rank=self.config["rank"])[:2]
+        basis = basis[: self.config["rank"]]
+        coefficients = (u.reshape(len(u), -1) - mean) @ basis.T
+        with torch.no_grad():
+            self.mean.copy_(torch.as_tensor(mean, dtype=torch.float32))
+            self.basis.copy_(torch.as_tensor(basis, dtype=torch.float32))
+            self.coef_scale.copy_(torch.as_tensor(np.std(coefficients, axis=0) + 1e-12, dtype=torch.float32))
+            self.angle_shift.fill_(float(np.mean(angles)))
+            self.angle_scale.fill_(float(np.std(angles) + 1e-12))
+
+    def targets(self, u: np.ndarray, angles: np.ndarray) -> np.ndarray:
+        """(POD coefficients in mm, elbow angle in deg) per sample, (n, r + 1)."""
+        coefficients = (u.reshape(len(u), -1) - self.mean.double().numpy()) @ self.basis.double().numpy().T
+        return np.column_stack([coefficients, angles])
+
+    def physical(self, out: torch.Tensor) -> torch.Tensor:
+        """Net output in the targets' units. The basis is orthonormal, so the squared coefficient
+        error is the squared node error of the projected displacements: the loss is in mm^2
+        (and deg^2 for the angle) without a (b, 3N) product per step."""
+        scale = torch.cat([self.coef_scale, self.angle_scale])
+        shift = torch.cat([torch.zeros_like(self.coef_scale), self.angle_shift])
+        return out * scale + shift
+
+    def displacements(self, out: torch.Tensor) -> torch.Tensor:
+        coef = self.physical(out)[:, :-1]
+        return (self.mean + coef @ self.basis).reshape(len(out), -1, 3)
+
+    def forward(self, alpha):
+        return self.net(alpha)
+
+    def deployable(self, reference: np.ndarray) -> nn.Module:
+        return _DeployedPodNet(self, reference)
+
+
+class _DeployedPodNet(nn.Module):
+    """alpha -> hidden -> (POD coefficients in mm, angle) -> positions: the basis is the last layer.
+
+    Kept as two layers (h -> r -> 3N) rather than folded into one (h -> 3N): with r below the
+    hidden width the factored form is the smaller and faster one.
+    """
+
+    def __init__(self, net: PodNet, reference: np.ndarray) -> None:
+        super().__init__()
+        self.hidden = net.net[:-1]
+        head = net.net[-1]
+        rank = net.config["rank"]
+        self.n_nodes = net.config["n_nodes"]
+        x = torch.as_tensor(np.asarray(reference, dtype=np.float32)).reshape(-1)
+        self.coefficients = nn.Linear(head.in_features, rank + 1)
+        self.positions = nn.Linear(rank, 3 * self.n_nodes)
+        scale = torch.cat([net.coef_scale, net.angle_scale])
+        shift = torch.cat([torch.zeros(rank), net.angle_shift])
+        with torch.no_grad():
+            self.coefficients.weight.copy_(head.weight * scale[:, None])
+            self.coefficients.bias.copy_(head.bias * scale + shift)
+            self.positions.weight.copy_(net.basis.T)
+            self.positions.bias.copy_(x + net.mean)
+
+    def forward(self, alpha):
+        c = self.coefficients(self.hidden(alpha))
+        return self.positions(c[:, :-1]).reshape(-1, self.n_nodes, 3), c[:, -1:]

@@ -1,0 +1,167 @@
+"""Training of the networks (SPEC 6): k-fold cross-validation, best-by-validation, resumable.
+
+Every fold trains a fresh net for ``epochs`` epochs (Adam, cosine learning rate, MSE loss on
+the net's targets) and reports, per epoch, the training loss, the validation loss and the
+validation MAE in mm of each coordinate (the paper's per-coordinate-net metric). The model kept
+is the one with the lowest validation loss over all folds and epochs. After every epoch the
+whole state (fold, epoch, weights, optimizer, best model, history) goes to ``checkpoint.pt``
+by write-and-rename, so a killed training resumes at the next epoch.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from persival.surrogate.networks import ACTIVATIONS, PaperNet, PodNet, pod_basis
+
+__all__ = ["TrainingConfig", "build_net", "train", "choose_rank"]
+
+
+@dataclass
+class TrainingConfig:
+    arch: str = "pod"  # "paper" or "pod"
+    folds: int = 5
+    epochs: int = 400  # per fold (the paper: 5 x 400)
+    batch_size: int = 64
+    learning_rate: float = 1e-3
+    activation: str = "silu"
+    seed: int = 0
+    # POD net
+    rank: int | None = None  # None: chosen by `energy`
+    energy: float = 0.99999
+    max_rank: int = 48
+    hidden: list[int] = field(default_factory=lambda: [64, 64, 64])
+    # paper net
+    n_mid: int = 700
+
+    def __post_init__(self) -> None:
+        if self.arch not in ("paper", "pod"):
+            raise ValueError(f"arch must be 'paper' or 'pod', got {self.arch!r}")
+        if self.activation not in ACTIVATIONS:
+            raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}, got {self.activation!r}")
+        for name in ("folds", "epochs", "batch_size"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+
+
+def choose_rank(u: np.ndarray, config: TrainingConfig):
+    """(rank, (mean, basis)): the smallest rank keeping ``energy`` of the displacement
+    fluctuations, at most ``max_rank`` (or ``config.rank``), and the POD itself."""
+    mean, basis, _ = pod_basis(u, rank=config.rank, energy=config.energy)
+    rank = min(len(basis), config.max_rank) if config.rank is None else len(basis)
+    return int(rank), (mean, basis[:rank])
+
+
+def build_net(config: TrainingConfig, n_nodes: int, rank: int | None = None):
+    if config.arch == "paper":
+        return PaperNet(n_nodes, config.activation, config.n_mid)
+    return PodNet(n_nodes, rank, tuple(config.hidden), config.activation)
+
+
+def _folds(n: int, k: int, seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    order = np.random.default_rng(seed).permutation(n)
+    if k == 1:  # no cross-validation: hold out a fifth
+        cut = max(1, n // 5)
+        return [(order[cut:], order[:cut])]
+    parts = np.array_split(order, k)
+    return [(np.concatenate(parts[:i] + parts[i + 1:]), parts[i]) for i in range(k)]
+
+
+def _save_atomic(obj, path: Path) -> None:
+    tmp = path.with_suffix(".tmp")
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+def _epoch(net, optimizer, x, y, batch: int, generator) -> float:
+    net.train()
+    total = 0.0
+    for rows in torch.randperm(len(x), generator=generator).split(batch):
+        optimizer.zero_grad(set_to_none=True)
+        loss = torch.mean((net.physical(net(x[rows])) - y[rows]) ** 2)
+        loss.backward()
+        optimizer.step()
+        total += float(loss) * len(rows)
+    return total / len(x)
+
+
+@torch.no_grad()
+def _validate(net, x, y, u) -> tuple[float, list[float]]:
+    net.eval()
+    out = net(x)
+    loss = float(torch.mean((net.physical(out) - y) ** 2))
+    mae = torch.mean(torch.abs(net.displacements(out) - u), dim=(0, 1))  # per coordinate, mm
+    return loss, [float(v) for v in mae]
+
+
+def train(dataset, config: TrainingConfig, out: str | Path, progress=None):
+    """Train on ``dataset`` (its displacements and elbow angles); returns (best net, history)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(config.seed)
+    u = dataset.displacements.astype(np.float32)
+    angles = np.asarray(dataset.elbow_angles, dtype=np.float64)
+    rank, pod = choose_rank(u, config) if config.arch == "pod" else (None, None)
+    checkpoint = out / "checkpoint.pt"
+    state = _resume(checkpoint, config, dataset)
+    template = build_net(config, u.shape[1], rank)
+    template.fit_normalization(u, angles, pod)  # POD and scales from all training states, as deployed
+    x = torch.as_tensor(dataset.activations, dtype=torch.float32)
+    y = torch.as_tensor(template.targets(u, angles), dtype=torch.float32)
+    ut = torch.as_tensor(u)
+    if state is None:
+        state = {"config": asdict(config), "digest": dataset.digest(), "fold": 0, "epoch": 0, "net": None,
+                 "optimizer": None, "best": None, "history": [], "wall_time_s": 0.0}
+    folds = _folds(len(x), config.folds, config.seed)
+    generator = torch.Generator().manual_seed(config.seed)
+    total_epochs = config.folds * config.epochs
+    while state["fold"] < len(folds):
+        train_rows, val_rows = (torch.as_tensor(r) for r in folds[state["fold"]])
+        net = copy.deepcopy(template)
+        optimizer = torch.optim.Adam(net.parameters(), lr=config.learning_rate)
+        schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=config.epochs, eta_min=config.learning_rate / 50)
+        if state["net"] is not None:  # resuming inside this fold
+            net.load_state_dict(state["net"])
+            optimizer.load_state_dict(state["optimizer"])
+            schedule.load_state_dict(state["schedule"])
+        while state["epoch"] < config.epochs:
+            t0 = time.perf_counter()
+            train_loss = _epoch(net, optimizer, x[train_rows], y[train_rows], config.batch_size, generator)
+            schedule.step()
+            val_loss, mae = _validate(net, x[val_rows], y[val_rows], ut[val_rows])
+            state["epoch"] += 1
+            state["history"].append({"fold": state["fold"], "epoch": state["epoch"], "train_loss": train_loss,
+                                     "val_loss": val_loss, "val_mae_mm": mae})
+            if state["best"] is None or val_loss < state["best"]["val_loss"]:
+                state["best"] = {"val_loss": val_loss, "fold": state["fold"], "epoch": state["epoch"],
+                                 "net": copy.deepcopy(net.state_dict())}
+            state.update(net=net.state_dict(), optimizer=optimizer.state_dict(), schedule=schedule.state_dict(),
+                         wall_time_s=state["wall_time_s"] + time.perf_counter() - t0)
+            _save_atomic(state, checkpoint)
+            if progress is not None:
+                progress(state["fold"] * config.epochs + state["epoch"], total_epochs, val_loss, mae)
+        state.update(fold=state["fold"] + 1, epoch=0, net=None, optimizer=None, schedule=None)
+        _save_atomic(state, checkpoint)
+    best = copy.deepcopy(template)
+    best.load_state_dict(state["best"]["net"])
+    best.eval()
+    summary = {"best": {k: v for k, v in state["best"].items() if k != "net"}, "history": state["history"],
+               "wall_time_s": state["wall_time_s"], "rank": rank, "config": asdict(config)}
+    return best, summary
+
+
+def _resume(checkpoint: Path, config: TrainingConfig, dataset):
+    if not checkpoint.exists():
+        return None
+    state = torch.load(checkpoint, weights_only=False)
+    if state["config"] != asdict(config) or state["digest"] != dataset.digest():
+        raise ValueError(f"{checkpoint} belongs to another training (config or data differ); "
+                         "use another --out folder or delete it")
+    return state
