@@ -136,7 +136,8 @@ class DeployedModel:
             if _io_shape(sess, "activations", True)[1:] != [N_ACTIVATIONS]:
                 raise ArtifactError("input 'activations' must be [batch, 5]")
             if _io_shape(sess, "positions", False)[1:] not in ([self.n_nodes, 3], [None, None]):
-                raise ArtifactError(f"output 'positions' is not [batch, {self.n_nodes}, 3] (metadata's n_nodes)")
+                raise ArtifactError(f"output 'positions' is not [batch, {self.n_nodes}, 3] (metadata's n_nodes): "
+                                    "model and metadata.json do not belong together")
             _io_shape(sess, "elbow_angle_deg", False)
         except ArtifactError as exc:
             raise ArtifactError(f"{variant['file']}: {exc}") from None

@@ -21,11 +21,15 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["LoadResult", "run_load_test", "MAX_CLIENTS", "MAX_RATE", "MAX_DURATION_S"]
+__all__ = ["LoadTestError", "LoadResult", "run_load_test", "MAX_CLIENTS", "MAX_RATE", "MAX_DURATION_S"]
 
 MAX_CLIENTS, MAX_RATE, MAX_DURATION_S = 64, 240.0, 120.0
 _BAD = ['{"activations": [0, 0, 0, 0, 2]}', "not json", '{"angle_deg": 1e9}', '{"activations": "x"}',
         '{"activations": [0, 0, 0, 0, 0], "extra": 1}']
+
+
+class LoadTestError(RuntimeError):
+    """The server under test could not be started."""
 
 
 @dataclass
@@ -102,14 +106,14 @@ def _start_server(artifacts: Path, port: int) -> subprocess.Popen:
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         if proc.poll() is not None:
-            raise RuntimeError(f"the server exited with {proc.returncode} before it listened")
+            raise LoadTestError(f"the server exited with {proc.returncode} before it listened")
         try:
             socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
             return proc
         except OSError:
             time.sleep(0.2)
     proc.kill()
-    raise RuntimeError("the server did not listen within 60 s")
+    raise LoadTestError("the server did not listen within 60 s")
 
 
 async def _run(url: str, pid: int, res: LoadResult, bad_every: int) -> None:
@@ -131,6 +135,9 @@ def run_load_test(artifacts: str | Path, clients: int = 8, rate: float = 60.0, d
     if not 1 <= clients <= MAX_CLIENTS or not 1 <= rate <= MAX_RATE or not 1 <= duration_s <= MAX_DURATION_S:
         raise ValueError(f"need 1 <= clients <= {MAX_CLIENTS}, 1 <= rate <= {MAX_RATE}, "
                          f"1 <= duration <= {MAX_DURATION_S} s")
+    from persival.deploy.artifacts import DeployedModel
+
+    DeployedModel(artifacts)  # a broken folder is reported here, not as a server that never listens
     port = _free_port()
     proc = _start_server(Path(artifacts), port)
     res = LoadResult(clients, float(rate), float(duration_s))

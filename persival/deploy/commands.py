@@ -27,15 +27,13 @@ def _register_serve(app: typer.Typer) -> None:
         import uvicorn
         from rich.console import Console
 
+        from persival.cli_errors import user_errors
         from persival.deploy.artifacts import ArtifactError
         from persival.deploy.server import WEB_DIST, create_app
 
         console = Console(stderr=True)
-        try:
+        with user_errors(ArtifactError):
             web_app = create_app(artifacts)
-        except ArtifactError as exc:
-            console.print(f"[red]error:[/red] {exc}")
-            raise typer.Exit(2) from None
         if not _is_loopback(host):
             console.print(f"[yellow]warning:[/yellow] binding {host}: the server is reachable from other machines")
         if not (WEB_DIST / "index.html").is_file():
@@ -65,14 +63,13 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
-        from persival.deploy.bench_serve import run_load_test
+        from persival.cli_errors import user_errors
+        from persival.deploy.artifacts import ArtifactError
+        from persival.deploy.bench_serve import LoadTestError, run_load_test
 
         console = Console()
-        try:
+        with user_errors(ArtifactError, LoadTestError):
             summary = run_load_test(artifacts, clients, rate, duration, bad_every).summary()
-        except (ValueError, RuntimeError) as exc:
-            console.print(f"[red]error:[/red] {exc}")
-            raise typer.Exit(2) from None
         table = Table(title=f"persival serve under load: {clients} clients x {rate:g} states/s, {duration:g} s")
         table.add_column("what")
         table.add_column("value", justify="right")
