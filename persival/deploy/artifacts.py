@@ -125,7 +125,12 @@ class DeployedModel:
         if "float32" not in variants:
             raise ArtifactError("metadata.json: models.deformation.variants has no 'float32'")
         self.sessions = {tier: self._deformation_session(tier, v) for tier, v in variants.items()}
-        self.angle_range = self._angle_model(_require(models, "activation_angle", dict, "metadata.json: models"))
+        # Optional parts: an export may lack the angle output, the angle model or the motion model;
+        # the requests that need them are refused then, the rest is served.
+        self.has_angle = "elbow_angle_deg" in [o.name for o in self.sessions["float32"].get_outputs()]
+        self.angle, self.angle_range = None, None
+        if models.get("activation_angle"):
+            self.angle_range = self._angle_model(models["activation_angle"])
         motion = models.get("activation_motion")
         self.motion = _session(self.folder / _require(motion, "file", str)) if motion else None
         self.max_load_kg = float(motion.get("max_load_kg", 0.0)) if motion else 0.0
@@ -138,7 +143,6 @@ class DeployedModel:
             if _io_shape(sess, "positions", False)[1:] not in ([self.n_nodes, 3], [None, None]):
                 raise ArtifactError(f"output 'positions' is not [batch, {self.n_nodes}, 3] (metadata's n_nodes): "
                                     "model and metadata.json do not belong together")
-            _io_shape(sess, "elbow_angle_deg", False)
         except ArtifactError as exc:
             raise ArtifactError(f"{variant['file']}: {exc}") from None
         out = sess.run(["positions"], {"activations": np.zeros((1, N_ACTIVATIONS), np.float32)})[0]
@@ -178,12 +182,17 @@ class DeployedModel:
             batch = np.stack([self.check_activations(r) for r in rows])
         else:
             batch = self.check_activations(rows)[None, :]
+        if not self.has_angle:
+            positions = self.sessions[tier].run(["positions"], {"activations": batch})[0]
+            return positions, np.full(len(batch), np.nan, np.float32)
         positions, angle = self.sessions[tier].run(["positions", "elbow_angle_deg"], {"activations": batch})
         return positions, angle[:, 0]
 
     def activations_for_angle(self, angle_deg, load_kg=None) -> np.ndarray:
         """Least-effort activations (5,) for a static elbow angle (and a hand load, if exported)."""
         angle = _finite_number(angle_deg, "angle_deg")
+        if self.angle is None:
+            raise ValueError("this export has no activation model (activation_angle.onnx): send activations")
         lo, hi = self.angle_range
         if not lo <= angle <= hi:
             raise ValueError(f"angle_deg = {angle} lies outside the model's range [{lo:.2f}, {hi:.2f}]")
@@ -205,8 +214,6 @@ class DeployedModel:
     def files(self) -> dict[str, Path]:
         """The artifact files a client may download: metadata.json and every listed model."""
         models = self.metadata["models"]
-        names = ["metadata.json", models["activation_angle"]["file"]]
-        names += [v["file"] for v in models["deformation"]["variants"].values()]
-        if models.get("activation_motion"):
-            names.append(models["activation_motion"]["file"])
+        names = ["metadata.json"] + [v["file"] for v in models["deformation"]["variants"].values()]
+        names += [models[k]["file"] for k in ("activation_angle", "activation_motion") if models.get(k)]
         return {n: self.folder / n for n in names}

@@ -95,7 +95,8 @@ def _add_http_routes(app: FastAPI, model: DeployedModel, limits: ServerLimits, f
     def health() -> dict:
         meta = model.metadata
         return {"status": "ok", "n_nodes": model.n_nodes, "muscles": model.muscles, "tiers": model.tiers,
-                "angle_range_deg": list(model.angle_range), "motion": model.motion is not None,
+                "angle_range_deg": list(model.angle_range) if model.angle_range else None,
+                "has_angle": model.has_angle, "motion": model.motion is not None,
                 "max_load_kg": model.max_load_kg, "format_version": meta["format_version"]}
 
     @app.post("/api/predict")

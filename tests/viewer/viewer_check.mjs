@@ -103,7 +103,7 @@ try {
   const s1 = await page.evaluate(() => ({ ...window.persival.stats(), t: performance.now() }));
   await page.screenshot({ path: join(outDir, 'playing.png') });
   await page.evaluate(() => window.persival.play(false));
-  result.play = { fps: s1.fps, inferenceMs: s1.inferenceMs, backend: s1.backend,
+  result.play = { fps: s1.fps, inferenceMs: s1.inferenceMs, backend: s1.backend, renderScale: s1.renderScale,
     statesPerS: ((s1.states - s0.states) * 1000) / (s1.t - s0.t) };
   result.ok = true;
 } catch (e) {

@@ -25,6 +25,7 @@ export function setupControls(v) {
   }
 
   const playBtn = document.getElementById('play');
+  if (!v.hasAngleModel) { angle.disabled = true; playBtn.disabled = true; }
   const play = (on = !v.playing) => {
     v.playing = on;
     if (on) v.playStart = performance.now();

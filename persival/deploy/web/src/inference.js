@@ -40,7 +40,8 @@ export class LocalEngine {
     const s = await this.session(this.variantFile(tier));
     this.input.set(activations);
     const out = await s.run({ activations: new ort.Tensor('float32', this.input, [1, 5]) });
-    return { positions: out.positions.data, angle: out.elbow_angle_deg.data[0], activations: this.input };
+    const angle = out.elbow_angle_deg ? out.elbow_angle_deg.data[0] : NaN; // optional output
+    return { positions: out.positions.data, angle, activations: this.input };
   }
 
   async deformBatch(flat, tier = 'float32') {

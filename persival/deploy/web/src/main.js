@@ -20,7 +20,9 @@ class Viewer {
     this.local = new LocalEngine(this.meta);
     this.server = new ServerEngine(this.meta.n_nodes);
     this.scene = new ArmScene(document.getElementById('view'), this.meta);
-    this.range = this.meta.models.activation_angle.range_deg;
+    // The angle controls need the activation model; without it only the sliders drive the arm.
+    this.hasAngleModel = Boolean(this.meta.models.activation_angle);
+    this.range = this.meta.models.activation_angle?.range_deg ?? this.meta.elbow_angle_range_deg ?? [0, 140];
     this.hasMotion = Boolean(this.meta.models.activation_motion);
     this.tiers = Object.keys(this.meta.models.deformation.variants);
     this.state = { activations: new Float32Array(5), driver: 'activations', angle: this.range[0], load: 0 };
@@ -97,6 +99,7 @@ class Viewer {
   }
 
   setAngle(deg, load = this.state.load) {
+    if (!this.hasAngleModel) throw new Error('this export has no activation model (activation_angle.onnx)');
     if (!(deg >= this.range[0] && deg <= this.range[1])) throw new Error(`angle outside [${this.range}]`);
     Object.assign(this.state, { angle: deg, load, driver: 'angle' });
     this.touch();
@@ -144,11 +147,12 @@ class Viewer {
     this.inferenceMs = Number.isFinite(this.inferenceMs) ? 0.8 * this.inferenceMs + 0.2 * ms : ms;
     this.state.activations.set(r.activations);
     this.scene.setPositions(r.positions);
-    this.scene.setElbowAngle(r.angle);
-    this.elbowAngle = r.angle;
+    const angle = Number.isFinite(r.angle) ? r.angle : 0; // NaN: the export has no angle output
+    this.scene.setElbowAngle(angle);
+    this.elbowAngle = angle;
     this.states++;
     this.applied = serial;
-    this.controls.show(r.activations, r.angle);
+    this.controls.show(r.activations, angle);
     if (this.mode === 'auto' && this.monitor.add(ms)) {
       const m = this.measured.find((x) => x.place === this.place && x.tier === this.tier);
       if (m) m.ms = this.monitor.ema;

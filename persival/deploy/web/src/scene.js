@@ -89,7 +89,7 @@ export class ArmScene {
   frame(meta) {
     // Frame the arm from mid-range to full flexion (where it spends its time; the straight arm
     // reaches below). setFromObject reads world matrices, which three.js updates only when drawing.
-    const [lo, hi] = meta.models.activation_angle.range_deg;
+    const [lo, hi] = meta.models.activation_angle?.range_deg ?? meta.elbow_angle_range_deg ?? [0, 120];
     const box = new THREE.Box3();
     for (const deg of [(lo + hi) / 2, hi]) {
       this.setElbowAngle(deg);
