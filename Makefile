@@ -3,10 +3,31 @@ PYTHON ?= python3.11
 VENV   := .venv
 BIN    := $(VENV)/bin
 OUT    ?= results
+WEB    := persival/deploy/web
+WEB_SRC := $(WEB)/package.json $(WEB)/package-lock.json $(WEB)/build.mjs $(WEB)/index.html $(wildcard $(WEB)/src/*)
 
-.PHONY: setup run test bench clean
+.PHONY: setup web chromium run test bench clean
 
-setup: $(VENV)/.installed
+setup: $(VENV)/.installed web
+
+# The web viewer (persival serve serves it): npm ci installs package-lock.json's exact versions,
+# esbuild bundles it into $(WEB)/dist; each step reruns only when its inputs are newer.
+web: $(WEB)/dist/index.html
+
+$(WEB)/node_modules/.package-lock.json: $(WEB)/package-lock.json
+	@command -v npm >/dev/null || { echo "need node >= 18 and npm to build the web viewer"; exit 1; }
+	cd $(WEB) && npm ci --no-audit --no-fund
+	touch $@
+
+$(WEB)/dist/index.html: $(WEB_SRC) $(WEB)/node_modules/.package-lock.json
+	cd $(WEB) && npm run build
+
+# Headless Chromium for the viewer tests: installed from Debian when missing (CI runs as root on
+# a fresh machine); elsewhere the viewer tests skip with a message.
+chromium:
+	@test -x /usr/bin/chromium || { if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver; \
+	  else echo "warning: no /usr/bin/chromium (apt-get install chromium): the viewer tests will skip"; fi; }
 
 $(VENV)/.installed: pyproject.toml
 	@command -v $(PYTHON) >/dev/null || { echo "need $(PYTHON) (set PYTHON=...)"; exit 1; }
@@ -18,7 +39,7 @@ $(VENV)/.installed: pyproject.toml
 run: setup
 	$(BIN)/persival run --out $(OUT)
 
-test: setup
+test: setup chromium
 	$(BIN)/pytest -n 2 -q
 
 bench: setup
