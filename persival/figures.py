@@ -1,4 +1,4 @@
-"""Writing matplotlib figures: one place for the file handling every evaluation plot shares."""
+"""Writing matplotlib figures: one place for the file handling every plot of every stage shares."""
 
 from __future__ import annotations
 

@@ -8,11 +8,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["MUSCLES", "N_ACTIVATIONS", "UNITS", "check_activations", "check_activation_vector"]
+__all__ = ["MUSCLES", "N_ACTIVATIONS", "ABBREVIATIONS", "ELBOW_ANGLE_BOUNDS_DEG", "UNITS", "check_activations",
+           "check_activation_vector"]
 
 #: The five muscles, in the order of every activation vector (SPEC section 1).
 MUSCLES = ("biceps", "brachialis", "brachioradialis", "triceps", "anconeus")
 N_ACTIVATIONS = len(MUSCLES)
+#: Three-letter column labels of the same order, for tables
+ABBREVIATIONS = ("BIC", "BRA", "BRD", "TRI", "ANC")
+#: Elbow angles that mean anything (deg): 0 = full extension, beyond 180 the forearm would pass the humerus
+ELBOW_ANGLE_BOUNDS_DEG = (0.0, 180.0)
 
 #: Units of the quantities the stages exchange (positions, angles, moments, forces, stresses).
 UNITS = {"length": "mm", "angle": "deg", "moment": "N mm", "force": "N", "stress": "MPa", "time": "s"}

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.evaluate.figures import save_figure
+from persival.figures import save_figure
 from persival.model.arm import ArmModel
 from persival.model.solver import ConvergenceError
 from persival.vocabulary import MUSCLES
@@ -104,7 +104,9 @@ def plot_curves(curves: dict, path: str | Path) -> Path:
 
     angles = curves["angles_deg"]
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharex=True)
-    for ax, key, title in ((axes[0], "passive_moment_Nmm", "passive (activation 0)"), (axes[1], "active_moment_Nmm", "fully active (activation 1)")):
+    panels = ((axes[0], "passive_moment_Nmm", "passive (activation 0)"),
+              (axes[1], "active_moment_Nmm", "fully active (activation 1)"))
+    for ax, key, title in panels:
         for name in MUSCLES:
             ax.plot(angles, curves[name][key], marker="o", ms=3, label=name)
         ax.plot(angles, -curves["external_moment_Nmm"], "k--", label="gravity + joint (to overcome)")

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.evaluate.figures import save_figure
+from persival.figures import save_figure
 from persival.evaluate.metrics import state_errors, summarize
 from persival.surrogate.sparse_grid import SparseGrid
 from persival.surrogate.surface_surrogate import SurfaceSurrogate

@@ -21,8 +21,8 @@ Only the new points are simulated; values of existing points are kept.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -123,11 +123,15 @@ def surplus_indicator(grid: SparseGrid, norm: str = "l2", output_scale=None) -> 
         return np.abs(c)
     if output_scale is not None:
         c = c / np.asarray(output_scale, dtype=np.float64)
-    if norm == "l2":
+    if _check_norm(norm) == "l2":
         return np.linalg.norm(c, axis=1)
-    if norm == "max":
-        return np.abs(c).max(axis=1)
-    raise ValueError(f"norm must be 'l2' or 'max', got {norm!r}")
+    return np.abs(c).max(axis=1)
+
+
+def _check_norm(norm: str) -> str:
+    if norm not in ("l2", "max"):
+        raise ValueError(f"norm must be 'l2' or 'max', got {norm!r}")
+    return norm
 
 
 def initial_grid(dim: int, level: int, degree: int = 3) -> SparseGrid:
@@ -254,6 +258,7 @@ def refine_adaptive(
     """
     if max_points < 1:
         raise ValueError("max_points must be >= 1")
+    _check_norm(norm)  # before the first (possibly hours of) simulation
     if initial is None:
         grid = initial_grid(dim, initial_level, degree)
         if grid.n_points > max_points:

@@ -7,11 +7,12 @@ from pathlib import Path
 import typer
 
 from persival.cli_errors import check_output_dir, fail, user_errors
+from persival.cli_help import FullHelpGroup
 
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     """Attach this stage's commands to the main app and the benchmark group."""
-    surrogate_app = typer.Typer(help="Surrogates fitted to campaign stores.", no_args_is_help=True)
+    surrogate_app = typer.Typer(cls=FullHelpGroup, help="Surrogates fitted to campaign stores.", no_args_is_help=True)
     app.add_typer(surrogate_app, name="surrogate")
 
     @surrogate_app.command("fit-sg")
@@ -87,3 +88,121 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             f"({result.stop_reason}); {result.simulated} states solved, {result.reused} reused; "
             f"{result.wall_time_s:.0f} s; wrote {out / 'surrogate'}"
         )
+
+    _register_inverse_and_networks(app)
+
+
+def _angles(text: str) -> list[float]:
+    try:
+        return [float(t) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise ValueError(f"--angles must be comma-separated numbers in degrees, got {text!r}") from None
+
+
+def _progress_bar(description: str):
+    """A rich progress bar and an ``advance(done, total, ...)`` callback for the stage functions."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    bar = Progress(TextColumn(description), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                   TextColumn("{task.fields[info]}"))
+    task = bar.add_task(description, total=None, info="")
+
+    def advance(done, total, *info):
+        text = f"val loss {info[0]:.4g}, MAE {', '.join(f'{v:.3f}' for v in info[1])} mm" if len(info) == 2 else ""
+        bar.update(task, completed=done if done > 1 or total is None else bar.tasks[0].completed + done,
+                   total=total, info=text)
+
+    return bar, advance
+
+
+def _register_inverse_and_networks(app: typer.Typer) -> None:
+    @app.command("inverse")
+    def inverse(
+        surrogate: Path = typer.Option(..., "--surrogate", help="Sparse-grid surrogate folder (persival surrogate fit-sg)."),
+        angles: str = typer.Option("20,60,100,140", "--angles", help="Target elbow angles, deg, comma-separated."),
+        as_json: bool = typer.Option(False, "--json", help="Print the solutions as JSON."),
+        out: Path = typer.Option(None, "--out", help="Also build the activation model Theta -> alpha_opt: "
+                                 "OUT/activation_model.json and .png."),
+    ) -> None:
+        """Least-effort activations for elbow angles (SPEC 5) on the SG; optionally the activation model."""
+        import json
+
+        from rich.console import Console
+        from rich.table import Table
+
+        from persival.surrogate.stage import build_activation_model, solve_inverse
+        from persival.vocabulary import ABBREVIATIONS
+
+        with user_errors(out=out):
+            targets = _angles(angles)
+            if out is not None:
+                check_output_dir(out)
+            solution, problem = solve_inverse(surrogate, targets)
+            lo, hi = problem.reachable_range()
+            if out is not None:
+                bar, advance = _progress_bar("activation model")
+                with bar:
+                    out.mkdir(parents=True, exist_ok=True)
+                    model = build_activation_model(surrogate, out / "activation_model.json", advance)
+        if as_json:
+            typer.echo(json.dumps(solution.rows(), indent=1))
+            return
+        console = Console()
+        table = Table(title=f"alpha_opt (angles in deg; reachable {lo:.2f} to {hi:.2f} deg)")
+        for col in ["target", *ABBREVIATIONS, "achieved", "obj.", "reach"]:
+            table.add_column(col, justify="right")
+        for r in solution.rows():
+            table.add_row(f"{r['target_deg']:.1f}", *[f"{a:.3f}" for a in r["activations"]], f"{r['achieved_deg']:.3f}",
+                          f"{r['objective']:.4f}", "yes" if r["reachable"] else "[red]no[/red]")
+        console.print(table)
+        if out is not None:
+            console.print(f"activation model: {len(model.knots)} knots over {model.range_deg[0]:.2f}-{model.range_deg[1]:.2f} "
+                          f"deg, {len(model.branch_notes)} branch notes; wrote {out}/activation_model.json and .png")
+
+    @app.command("data")
+    def data(
+        surrogate: Path = typer.Option(..., "--surrogate", help="Sparse-grid surrogate folder."),
+        activation_model: Path = typer.Option(..., "--activation-model", help="activation_model.json (persival inverse --out)."),
+        out: Path = typer.Option(..., "--out", help="Training-data folder (zarr chunks + training_data.json)."),
+        samples: int = typer.Option(4000, "--samples", min=1, help="Number of states."),
+        angle_fraction: float = typer.Option(0.5, "--angle-fraction", min=0.0, max=1.0,
+                                             help="Share of states at alpha_opt(Theta); the rest at random alpha."),
+        seed: int = typer.Option(0, "--seed", help="Random seed (same seed, same data)."),
+    ) -> None:
+        """SG training data for the networks: states at alpha_opt(Theta) and at random activations."""
+        from persival.surrogate.stage import make_training_data
+
+        with user_errors(out=out):
+            check_output_dir(out)
+            bar, advance = _progress_bar("training data")
+            with bar:
+                make_training_data(surrogate, activation_model, out, samples, angle_fraction, seed, advance)
+        typer.echo(f"wrote {samples} states ({angle_fraction:.0%} at alpha_opt(Theta)) to {out}")
+
+    @app.command("train")
+    def train(
+        data: Path = typer.Option(..., "--data", help="Training-data folder (persival data)."),
+        out: Path = typer.Option(..., "--out", help="Network folder; a checkpoint there is resumed."),
+        arch: str = typer.Option("pod", "--arch", help="paper (the paper's exponential nets) or pod (POD network)."),
+        muscle: str = typer.Option("all", "--muscle", help="Muscles to learn: all, or a comma-separated list."),
+        folds: int = typer.Option(5, "--folds", min=1, help="Cross-validation folds."),
+        epochs: int = typer.Option(400, "--epochs", min=1, help="Epochs per fold."),
+        activation: str = typer.Option("silu", "--activation", help="relu, tanh, silu or elu."),
+        batch_size: int = typer.Option(64, "--batch-size", min=1),
+        learning_rate: float = typer.Option(1e-3, "--learning-rate", min=0.0),
+        rank: int = typer.Option(None, "--rank", min=1, help="POD rank (default: by the energy criterion)."),
+    ) -> None:
+        """Train the paper network or the POD network (k-fold CV, best by validation loss)."""
+        from persival.surrogate.stage import parse_muscles, train_network
+        from persival.surrogate.training import TrainingConfig
+
+        with user_errors(out=out):
+            check_output_dir(out)
+            config = TrainingConfig(arch=arch, folds=folds, epochs=epochs, activation=activation, batch_size=batch_size,
+                                    learning_rate=learning_rate, rank=rank)
+            bar, advance = _progress_bar(f"training ({arch})")
+            with bar:
+                surrogate = train_network(data, out, config, parse_muscles(muscle), advance)
+        best = surrogate.metadata["training"]["best"]
+        typer.echo(f"best validation loss {best['val_loss']:.4g} (fold {best['fold']}, epoch {best['epoch']}), "
+                   f"{surrogate.metadata['parameters']} parameters; wrote {out} (history.png)")

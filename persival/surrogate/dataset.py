@@ -22,6 +22,13 @@ __all__ = ["Surfaces", "Dataset", "describe_source"]
 
 
 @dataclass
+class _Topology:  # the fields of SurfaceTopology that Surfaces.from_topologies reads
+    name: str
+    reference_points: np.ndarray
+    triangles: np.ndarray
+
+
+@dataclass
 class Surfaces:
     """Several muscles' display surfaces as one node list: muscle m owns a contiguous node range."""
 
@@ -121,6 +128,20 @@ class Dataset:
                        {**self.source, "states": int(len(self.activations[rows]))},
                        None if self.target_deg is None else self.target_deg[rows])
 
+    def select(self, muscles) -> Dataset:
+        """The same states with only some muscles' surfaces (e.g. the paper's biceps)."""
+        names = [muscles] if isinstance(muscles, str) else list(muscles)
+        slices = [self.surfaces.nodes_of(n) for n in names]
+        topologies = []
+        for name, sl in zip(names, slices):
+            k = self.surfaces.names.index(name)
+            t0 = self.surfaces.triangle_starts[k]
+            tri = self.surfaces.triangles[t0 : t0 + self.surfaces.triangle_counts[k]] - sl.start
+            topologies.append(_Topology(name, self.surfaces.reference_points[sl], tri))
+        positions = np.concatenate([self.positions[:, sl] for sl in slices], axis=1)
+        return Dataset(self.activations, positions, self.elbow_angles, Surfaces.from_topologies(topologies),
+                       self.source, self.target_deg)
+
     def digest(self) -> str:
         """sha256 of the inputs and outputs (provenance of anything trained on it)."""
         h = hashlib.sha256()
@@ -144,7 +165,8 @@ class Dataset:
                 raise ValueError(f"{path} has no finished state")
             positions = np.concatenate([store.surface_positions(m, done) for m in names], axis=1)
             source = {**describe_source(store.summary(), reference.description, len(done)),
-                      "model_hash": reference.model_hash, "store": str(path)}
+                      "model_hash": reference.model_hash, "store": str(path),
+                      "simulator_options": dict(store.spec.options)}
             return cls(store.activations[done], positions, store.elbow_angles()[done],
                        Surfaces.from_topologies([reference.surfaces[m] for m in names]), source)
 

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize
 
+from persival.vocabulary import ELBOW_ANGLE_BOUNDS_DEG
+
 __all__ = ["InverseSolution", "InverseProblem", "EFFORT_WEIGHT"]
 
 #: SPEC 5: weight of the effort sum(alpha) against one degree of angle error
@@ -48,6 +50,10 @@ def _check_targets(targets) -> np.ndarray:
         raise ValueError(f"targets must be a non-empty list of angles in degrees, got shape {t.shape}")
     if not np.isfinite(t).all():
         raise ValueError(f"elbow-angle targets must be finite, got {t[~np.isfinite(t)][0]}")
+    lo, hi = ELBOW_ANGLE_BOUNDS_DEG
+    outside = (t < lo) | (t > hi)
+    if outside.any():  # not a reachability question: no elbow bends there
+        raise ValueError(f"elbow-angle target {t[outside][0]:g} deg is outside {lo:g} to {hi:g} deg")
     return t
 
 
@@ -73,16 +79,22 @@ class InverseProblem:
     def reachable_range(self) -> tuple[float, float]:
         """(min, max) elbow angle over [0,1]^5 (deg), by multi-start L-BFGS-B on the SG."""
         if self._range is None:
-            ends = []
-            for sign in (1.0, -1.0):
-                order = np.argsort(sign * self.candidate_angles)[:5]
-                best = min((minimize(lambda a: sign * self.model.predict_angle(a[None])[0], self.candidates[k],
-                                     jac=lambda a: sign * self.model.angle_gradient(a[None])[0],
-                                     method="L-BFGS-B", bounds=[(0.0, 1.0)] * 5) for k in order),
-                           key=lambda r: r.fun)
-                ends.append(sign * best.fun)
+            ends = [self._extreme_angle(sign) for sign in (1.0, -1.0)]
             self._range = (float(ends[0]), float(ends[1]))
         return self._range
+
+    def _extreme_angle(self, sign: float) -> float:
+        """min (sign 1) or max (sign -1) of theta over the cube, from the 5 best candidates."""
+        def f(a):
+            return sign * self.model.predict_angle(a[None])[0]
+
+        def df(a):
+            return sign * self.model.angle_gradient(a[None])[0]
+
+        starts = np.argsort(sign * self.candidate_angles)[:5]
+        best = min((minimize(f, self.candidates[k], jac=df, method="L-BFGS-B", bounds=[(0.0, 1.0)] * 5)
+                    for k in starts), key=lambda r: r.fun)
+        return sign * best.fun
 
     # ------------------------------------------------------------------ solving
     def objective(self, activations, target: float) -> np.ndarray:

@@ -187,15 +187,17 @@ class _DeployedPodNet(nn.Module):
         self.n_nodes = net.config["n_nodes"]
         x = torch.as_tensor(np.asarray(reference, dtype=np.float32)).reshape(-1)
         self.coefficients = nn.Linear(head.in_features, rank + 1)
-        self.positions = nn.Linear(rank, 3 * self.n_nodes)
+        # the basis as an explicit MatMul + Add (not one Gemm): the float16 tier keeps the Add,
+        # whose bias X + mean is hundreds of mm, in float32 (float16 resolves 0.25 mm there)
+        self.register_buffer("basis", net.basis.clone())  # (r, 3N)
+        self.register_buffer("offset", x + net.mean)  # (3N,)
         scale = torch.cat([net.coef_scale, net.angle_scale])
         shift = torch.cat([torch.zeros(rank), net.angle_shift])
         with torch.no_grad():
             self.coefficients.weight.copy_(head.weight * scale[:, None])
             self.coefficients.bias.copy_(head.bias * scale + shift)
-            self.positions.weight.copy_(net.basis.T)
-            self.positions.bias.copy_(x + net.mean)
 
     def forward(self, alpha):
         c = self.coefficients(self.hidden(alpha))
-        return self.positions(c[:, :-1]).reshape(-1, self.n_nodes, 3), c[:, -1:]
+        u = torch.matmul(c[:, :-1], self.basis) + self.offset
+        return u.reshape(-1, self.n_nodes, 3), c[:, -1:]

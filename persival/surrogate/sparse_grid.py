@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from fractions import Fraction
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -52,7 +52,7 @@ _SINGULAR_MSG = (
 # --------------------------------------------------------------------------------------------
 # 1-D cardinal B-spline
 # --------------------------------------------------------------------------------------------
-@lru_cache(maxsize=None)
+@cache
 def _piece_coefficients(p: int) -> tuple[np.ndarray, np.ndarray]:
     """Coefficients of b^p on each unit interval [k, k+1] as polynomials in t = x - k.
 

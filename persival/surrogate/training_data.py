@@ -50,7 +50,8 @@ def generate_training_data(sg, activation_model, out: str | Path, n_samples: int
     alpha, targets = sample_inputs(activation_model, n_samples, angle_fraction, seed)
     config = {"n_samples": n_samples, "angle_fraction": angle_fraction, "seed": seed, "chunk": chunk,
               "angle_range_deg": list(activation_model.range_deg)}
-    source = {**{k: v for k, v in sg.metadata.items() if k in ("simulator", "profile", "states", "label", "model_hash")},
+    kept = ("simulator", "profile", "states", "label", "model_hash", "simulator_options")
+    source = {**{k: v for k, v in sg.metadata.items() if k in kept},
               "generator": f"level-{sg.metadata.get('level')} sparse grid ({sg.metadata.get('grid_points')} points)"}
     n_nodes = sg.n_nodes
     meta_file = out / "training_data.json"

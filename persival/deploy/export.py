@@ -1,0 +1,134 @@
+"""The portable export of SPEC 9 (layout and contract: docs/deployment.md).
+
+``export_model(surrogate, out, activation_model=...)`` writes the deformation network as ONNX
+in three tiers (float32; float16 weights with float32 inputs and outputs; dynamic int8
+quantization of the matrix products), the activation models, and ``metadata.json`` with the
+surfaces, the skeleton, the reachable range and the provenance. Every tier is run once through
+onnxruntime against the PyTorch graph it came from, and the differences go into the metadata:
+float32 must agree within 1e-4 mm or the export fails.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import torch
+
+import persival
+from persival.vocabulary import MUSCLES, UNITS
+
+__all__ = ["export_model", "FORMAT_NAME", "FORMAT_VERSION", "OPSET", "FLOAT32_TOLERANCE_MM"]
+
+FORMAT_NAME = "persival-export"
+FORMAT_VERSION = 1
+OPSET = 17
+FLOAT32_TOLERANCE_MM = 1e-4
+
+
+def _onnx(module: torch.nn.Module, example: torch.Tensor, path: Path, input_name: str, output_names: list[str]) -> None:
+    axes = {input_name: {0: "batch"}, **{name: {0: "batch"} for name in output_names}}
+    torch.onnx.export(module.eval(), (example,), str(path), input_names=[input_name], output_names=output_names,
+                      dynamic_axes=axes, opset_version=OPSET, dynamo=False)
+
+
+def _session(path: Path):
+    import onnxruntime as ort
+
+    return ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+
+
+def _tiers(float32: Path) -> dict[str, Path]:
+    """float16 and int8 variants next to the float32 file."""
+    import onnx
+    from onnxconverter_common import float16
+    from onnxruntime.quantization import QuantType, quantize_dynamic
+
+    half = float32.with_name(float32.stem + ".float16.onnx")
+    # Adds stay float32: they carry the reference coordinates (hundreds of mm) of the last bias
+    model16 = float16.convert_float_to_float16(onnx.load(str(float32)), keep_io_types=True, op_block_list=["Add"])
+    onnx.save(model16, str(half))
+    int8 = float32.with_name(float32.stem + ".int8.onnx")
+    # per channel: the POD modes differ in scale by orders of magnitude
+    quantize_dynamic(str(float32), str(int8), weight_type=QuantType.QInt8, per_channel=True)
+    return {"float32": float32, "float16": half, "int8": int8}
+
+
+def _check_tiers(files: dict[str, Path], graph, probe: np.ndarray, names: list[str]) -> dict:
+    """Max |onnxruntime - torch| per tier and output, on the probe activations."""
+    with torch.no_grad():
+        ref = graph(torch.as_tensor(probe, dtype=torch.float32))
+    ref = [r.numpy() for r in (ref if isinstance(ref, tuple) else (ref,))]
+    out = {}
+    for tier, path in files.items():
+        got = _session(path).run(None, {"activations": probe.astype(np.float32)})
+        diffs = {name: float(np.abs(g - r).max()) for name, g, r in zip(names, got, ref)}
+        out[tier] = {"file": path.name, "bytes": path.stat().st_size,
+                     "max_abs_diff_vs_torch": diffs}
+    worst = out["float32"]["max_abs_diff_vs_torch"]["positions"]
+    if worst > FLOAT32_TOLERANCE_MM:
+        raise RuntimeError(f"the float32 ONNX model differs from PyTorch by {worst:.2e} mm "
+                           f"(tolerance {FLOAT32_TOLERANCE_MM:.0e})")
+    return out
+
+
+def _export_activation_model(model, out: Path) -> dict:
+    path = out / "activation_angle.onnx"
+    module = model.torch_module()
+    _onnx(module, torch.full((2, 1), 0.5 * sum(model.range_deg)), path, "elbow_angle_deg", ["activations"])
+    probe = np.linspace(*model.range_deg, 257)[:, None]
+    got = _session(path).run(None, {"elbow_angle_deg": probe.astype(np.float32)})[0]
+    diff = float(np.abs(got - model.predict(probe[:, 0])).max())
+    return {"file": path.name, "input": "elbow_angle_deg", "output": "activations",
+            "range_deg": list(model.range_deg), "knots": len(model.knots), "max_abs_diff_vs_python": diff,
+            "branch_notes": model.branch_notes}
+
+
+def export_model(surrogate, out: str | Path, activation_model=None, motion_model=None, accuracy: dict | None = None,
+                 n_probe: int = 64, seed: int = 0) -> dict:
+    """Write the export folder for a fitted :class:`NetworkSurrogate`; returns the metadata."""
+    from persival.campaign.skeleton import skeleton_for
+
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"{out} exists and is not a folder")
+    tmp = out.with_name(f".{out.name}.exporting")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    graph = surrogate.deployable()
+    names = ["positions", "elbow_angle_deg"] if surrogate.has_angle else ["positions"]
+    _onnx(graph, torch.full((2, 5), 0.5), tmp / "deformation.onnx", "activations", names)
+    probe = np.random.default_rng(seed).uniform(0.0, 1.0, (n_probe, 5))
+    variants = _check_tiers(_tiers(tmp / "deformation.onnx"), graph, probe, names)
+    surfaces = surrogate.surfaces
+    source = surrogate.metadata.get("source", {})
+    n = surfaces.n_nodes
+    outputs = {"positions": [None, n, 3], **({"elbow_angle_deg": [None, 1]} if surrogate.has_angle else {})}
+    models = {"deformation": {"inputs": {"activations": [None, 5]}, "outputs": outputs,
+                              "variants": variants, "architecture": surrogate.metadata.get("arch"),
+                              "parameters": surrogate.metadata.get("parameters"), "accuracy": accuracy or {}}}
+    if activation_model is not None:
+        models["activation_angle"] = _export_activation_model(activation_model, tmp)
+    if motion_model is not None:
+        models["activation_motion"] = motion_model.export_onnx(tmp)
+    metadata = {
+        "format": FORMAT_NAME, "format_version": FORMAT_VERSION, "units": {**UNITS, "load": "kg"},
+        "muscles": list(MUSCLES), "n_nodes": n, "surfaces": surfaces.ranges(),
+        "reference_points": np.round(surfaces.reference_points, 4).tolist(),
+        "triangles": surfaces.triangles.tolist(),
+        "skeleton": skeleton_for(source.get("simulator", ""), source.get("simulator_options")),
+        "elbow_angle_range_deg": list(activation_model.range_deg) if activation_model is not None else None,
+        "models": models,
+        "provenance": {"source": source, "dataset_sha256": surrogate.metadata.get("training", {}).get("dataset_sha256"),
+                       "training": {k: v for k, v in surrogate.metadata.get("training", {}).items() if k != "history"},
+                       "persival_version": persival.__version__, "torch": torch.__version__, "opset": OPSET,
+                       "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")},
+    }
+    (tmp / "metadata.json").write_text(json.dumps(metadata, default=float))
+    if out.exists():
+        shutil.rmtree(out)
+    tmp.rename(out)
+    return metadata
