@@ -37,6 +37,7 @@ class LoadResult:
     clients: int
     rate_per_client: float
     duration_s: float
+    encoding: str = "binary"
     latencies_ms: list = field(default_factory=list)
     good: int = 0
     bad_sent: int = 0
@@ -48,6 +49,7 @@ class LoadResult:
     def summary(self) -> dict:
         lat = np.asarray(self.latencies_ms) if self.latencies_ms else np.array([np.nan])
         return {"clients": self.clients, "rate_per_client": self.rate_per_client, "duration_s": self.duration_s,
+                "encoding": self.encoding, "offered_per_s": self.clients * self.rate_per_client,
                 "states": self.good, "states_per_s": self.good / self.wall_s if self.wall_s else 0.0,
                 "p50_ms": float(np.percentile(lat, 50)), "p99_ms": float(np.percentile(lat, 99)),
                 "max_ms": float(lat.max()), "bad_sent": self.bad_sent, "bad_refused": self.bad_refused,
@@ -60,34 +62,44 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def _good_reply(reply, n: int) -> bool:
+    if isinstance(reply, bytes):  # binary: the id leads the header (protocol.BINARY_HEADER)
+        return len(reply) > 28 and int.from_bytes(reply[:4], "little") == n
+    reply = json.loads(reply)
+    return reply.get("id") == n and "muscles" in reply
+
+
 async def _client(url: str, k: int, rate: float, until: float, bad_every: int, res: LoadResult) -> None:
     import websockets
 
     period, n = 1.0 / rate, 0
     async with websockets.connect(url, max_size=2**24) as ws:
         next_t = time.perf_counter()
-        while next_t < until:
+        while time.perf_counter() < until:
             await asyncio.sleep(max(0.0, next_t - time.perf_counter()))
-            next_t += period
+            # a late reply skips the slots it missed (a frame clock does not burst to catch up)
+            next_t = max(next_t + period, time.perf_counter())
             n += 1
             bad = bad_every > 0 and (n + k) % bad_every == 0
             alpha = [round((np.sin(0.05 * n + j + k) + 1) / 2, 6) for j in range(5)]
-            msg = _BAD[(n + k) % len(_BAD)] if bad else json.dumps({"id": n, "activations": alpha})
+            msg = _BAD[(n + k) % len(_BAD)] if bad else json.dumps({"id": n, "activations": alpha,
+                                                                     "encoding": res.encoding})
             t0 = time.perf_counter()
             await ws.send(msg)
-            reply = json.loads(await ws.recv())
+            raw = await ws.recv()
             dt = (time.perf_counter() - t0) * 1e3
             if bad:
+                reply = json.loads(raw) if isinstance(raw, str) else {}
                 res.bad_sent += 1
                 ok = 400 <= int(reply.get("status", 0)) < 500 and "error" in reply
                 res.bad_refused += ok
                 if not ok:
                     res.errors.append(f"client {k}: bad request {msg!r} was answered {str(reply)[:80]}")
-            elif reply.get("id") == n and "muscles" in reply:
+            elif _good_reply(raw, n):
                 res.good += 1
                 res.latencies_ms.append(dt)
             else:
-                res.errors.append(f"client {k}: request {n} got {str(reply)[:120]}")
+                res.errors.append(f"client {k}: request {n} got {str(raw)[:120]}")
 
 
 async def _sample_rss(pid: int, res: LoadResult, stop: asyncio.Event) -> None:
@@ -130,7 +142,7 @@ async def _run(url: str, pid: int, res: LoadResult, bad_every: int) -> None:
 
 
 def run_load_test(artifacts: str | Path, clients: int = 8, rate: float = 60.0, duration_s: float = 10.0,
-                  bad_every: int = 25) -> LoadResult:
+                  bad_every: int = 25, encoding: str = "binary") -> LoadResult:
     """Start a server on a free loopback port, load it, stop it; raises ValueError on bad bounds."""
     if not 1 <= clients <= MAX_CLIENTS or not 1 <= rate <= MAX_RATE or not 1 <= duration_s <= MAX_DURATION_S:
         raise ValueError(f"need 1 <= clients <= {MAX_CLIENTS}, 1 <= rate <= {MAX_RATE}, "
@@ -140,7 +152,9 @@ def run_load_test(artifacts: str | Path, clients: int = 8, rate: float = 60.0, d
     DeployedModel(artifacts)  # a broken folder is reported here, not as a server that never listens
     port = _free_port()
     proc = _start_server(Path(artifacts), port)
-    res = LoadResult(clients, float(rate), float(duration_s))
+    if encoding not in ("binary", "json"):
+        raise ValueError("encoding must be 'binary' (what the viewer uses) or 'json'")
+    res = LoadResult(clients, float(rate), float(duration_s), encoding)
     try:
         asyncio.run(_run(f"ws://127.0.0.1:{port}/ws", proc.pid, res, bad_every))
     finally:

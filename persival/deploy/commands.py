@@ -55,6 +55,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         rate: float = typer.Option(60.0, "--rate", min=1, max=240, help="States per second per client."),
         duration: float = typer.Option(10.0, "--duration", min=1, max=120, help="Seconds of load."),
         bad_every: int = typer.Option(25, "--bad-every", min=0, help="Every k-th request is malformed (0: none)."),
+        encoding: str = typer.Option("binary", "--encoding", help="Reply encoding: binary (the viewer's) or json."),
         json_out: Path = typer.Option(None, "--json", help="Also write the figures to this file."),
     ) -> None:
         """Load-test the server on loopback: N WebSocket clients at M states/s; latency, throughput, errors."""
@@ -69,11 +70,11 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
 
         console = Console()
         with user_errors(ArtifactError, LoadTestError):
-            summary = run_load_test(artifacts, clients, rate, duration, bad_every).summary()
-        table = Table(title=f"persival serve under load: {clients} clients x {rate:g} states/s, {duration:g} s")
+            summary = run_load_test(artifacts, clients, rate, duration, bad_every, encoding).summary()
+        table = Table(title=f"persival serve: {clients} clients x {rate:g} states/s, {duration:g} s, {encoding}")
         table.add_column("what")
         table.add_column("value", justify="right")
-        for key in ("states", "states_per_s", "p50_ms", "p99_ms", "max_ms", "bad_sent", "bad_refused",
+        for key in ("offered_per_s", "states", "states_per_s", "p50_ms", "p99_ms", "max_ms", "bad_sent", "bad_refused",
                     "errors", "server_peak_rss_mb"):
             value = summary[key]
             table.add_row(key, f"{value:.3g}" if isinstance(value, float) else str(value))
