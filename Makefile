@@ -6,7 +6,7 @@ OUT    ?= results
 WEB    := persival/deploy/web
 WEB_SRC := $(WEB)/package.json $(WEB)/package-lock.json $(WEB)/build.mjs $(WEB)/index.html $(wildcard $(WEB)/src/*)
 
-.PHONY: setup web chromium run test bench clean
+.PHONY: setup web chromium run lint test bench clean
 
 setup: $(VENV)/.installed web
 
@@ -39,7 +39,11 @@ $(VENV)/.installed: pyproject.toml
 run: setup
 	$(BIN)/persival run --out $(OUT)
 
-test: setup chromium
+# ruff: the rules and their reasons are in pyproject.toml ([tool.ruff])
+lint: setup
+	$(BIN)/ruff check persival tests
+
+test: setup chromium lint
 	$(BIN)/pytest -n 2 -q
 
 bench: setup

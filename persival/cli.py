@@ -9,14 +9,16 @@ from __future__ import annotations
 import typer
 
 from persival.cli_errors import ErrorReportingGroup
+from persival.cli_help import FullHelpGroup
 
 app = typer.Typer(
     cls=ErrorReportingGroup,
     help="PerSival: FE upper-limb model -> sparse-grid / neural surrogates -> real-time deployment.",
     no_args_is_help=True,
     pretty_exceptions_show_locals=False,
+    rich_markup_mode=None,  # plain help, wrapped, never cut (persival.cli_help)
 )
-bench_app = typer.Typer(help="Speed benchmarks (print tables).", no_args_is_help=True)
+bench_app = typer.Typer(cls=FullHelpGroup, help="Speed benchmarks (print tables).", no_args_is_help=True)
 app.add_typer(bench_app, name="bench")
 
 

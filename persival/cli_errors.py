@@ -9,14 +9,17 @@ app is a :class:`ErrorReportingGroup`.
 
 from __future__ import annotations
 
+import os
 import shutil
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-import click
 import typer
-from typer.core import TyperGroup
+import typer.exceptions
+
+from persival.cli_help import FullHelpGroup
 
 __all__ = ["USER_ERRORS", "ErrorReportingGroup", "fail", "user_errors", "check_output_dir", "check_output_file"]
 
@@ -24,9 +27,10 @@ __all__ = ["USER_ERRORS", "ErrorReportingGroup", "fail", "user_errors", "check_o
 USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, FileNotFoundError, NotADirectoryError,
                                                 IsADirectoryError, FileExistsError)
 
-# typer >= 0.20 has its own Exit / Abort beside click's; a command may raise either.
-_EXITS = tuple({click.exceptions.Exit, getattr(typer, "Exit", click.exceptions.Exit)})
-_PASS_THROUGH = _EXITS + tuple({click.exceptions.Abort, getattr(typer, "Abort", click.exceptions.Abort)}) + (click.ClickException,)
+# typer >= 0.2x vendors click: its Exit, Abort and usage errors (TyperException) are its own
+# classes, not the installed click's. They carry their own reporting and exit code.
+_EXITS = (typer.Exit,)
+_PASS_THROUGH = (typer.Exit, typer.Abort, typer.exceptions.TyperException)
 
 EXIT_USER_ERROR = 2
 EXIT_INTERNAL_ERROR = 1
@@ -34,7 +38,11 @@ EXIT_INTERNAL_ERROR = 1
 
 def _one_line(message: str) -> str:
     # Pydantic and some OS errors span several lines; the contract is one line.
-    return "; ".join(part.strip() for part in str(message).splitlines() if part.strip())
+    text = ""
+    for part in (p.strip() for p in str(message).splitlines()):
+        if part:
+            text += part if not text else (" " if text.endswith(":") else "; ") + part
+    return text
 
 
 def _message(exc: BaseException) -> str:
@@ -103,15 +111,18 @@ def check_output_file(path: Path, what: str = "--out") -> Path:
     return path
 
 
-class ErrorReportingGroup(TyperGroup):
+class ErrorReportingGroup(FullHelpGroup):
     """The main app's group: an exception that is not a user error becomes one line and exit 1,
     unless ``--debug`` was given, which lets it through with its traceback."""
 
-    def invoke(self, ctx: click.Context):
+    def invoke(self, ctx):
         try:
             return super().invoke(ctx)
         except _PASS_THROUGH:
             raise
+        except BrokenPipeError:  # the reader went away (`persival --help | head`): nothing to report
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nor at interpreter exit
+            raise typer.Exit(EXIT_INTERNAL_ERROR) from None
         except Exception as exc:
             if ctx.params.get("debug"):
                 raise

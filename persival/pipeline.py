@@ -25,8 +25,8 @@ def _write_json(path: Path, data: dict) -> None:
 def model_stage(out: Path, profile: str = "quick") -> dict:
     import meshio
 
-    from persival.model.arm import ArmModel
     from persival.campaign.arm_simulator import muscle_surface
+    from persival.model.arm import ArmModel
     from persival.model.output import bone_surfaces, muscle_submesh
 
     t0 = time.perf_counter()

@@ -15,7 +15,8 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def run(
         out: Path = typer.Option(Path("results"), "--out", help="Results directory."),
-        profile: str = typer.Option("quick", "--profile", help=profiles_help("Mesh profile of the built-in arm", model_option=False)),
+        profile: str = typer.Option(
+            "quick", "--profile", help=profiles_help("Mesh profile of the built-in arm", model_option=False)),
     ) -> None:
         """End to end over the stages that exist: model -> FE -> campaign -> surrogate -> evaluate."""
         from persival.model.arm_file import load_model_file

@@ -56,7 +56,8 @@ def test_moment_arms_at_90_degrees_are_anatomical():
     arm = ArmModel.__new__(ArmModel)  # geometry only: no meshing
     arm.spec, _ = load_model_file()
     arm.axis, arm.centre = np.array([1.0, 0.0, 0.0]), np.zeros(3)
-    expected = {"biceps": (35, 45), "brachialis": (20, 25), "brachioradialis": (50, 70), "triceps": (-22, -18), "anconeus": (-12, -8)}
+    expected = {"biceps": (35, 45), "brachialis": (20, 25), "brachioradialis": (50, 70), "triceps": (-22, -18),
+                "anconeus": (-12, -8)}
     for muscle in arm.spec.ordered_muscles():
         r = arm.line_moment_arm(muscle, 90.0)
         lo, hi = expected[muscle.name]

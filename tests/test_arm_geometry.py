@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from persival.vocabulary import MUSCLES
 from persival.campaign.arm_simulator import ArmSimulator
+from persival.vocabulary import MUSCLES
 
 
 @pytest.fixture(scope="module")

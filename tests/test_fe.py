@@ -75,7 +75,8 @@ def analytic_uniaxial_force(stretch, activation, muscle_fraction, bulk_modulus):
         B1 = 2 * c1 * I3 ** (-1 / 3) + 2 * c2 * I3 ** (-2 / 3) * I1
         B2 = -2 * c2 * I3 ** (-2 / 3)
         B3 = -2 / 3 * c1 * I3 ** (-1 / 3) * I1 - 4 / 3 * c2 * I3 ** (-2 / 3) * I2 + bulk_modulus * (J - 1) * J
-        phi_m = (p.muscle.c3 * (lam**p.muscle.c4 - 1) / lam**2 if lam >= 1 else 0.0) + activation * p.S_max * force_length(lam)[0] / lam**2
+        passive = p.muscle.c3 * (lam**p.muscle.c4 - 1) / lam**2 if lam >= 1 else 0.0
+        phi_m = passive + activation * p.S_max * force_length(lam)[0] / lam**2
         phi_t = p.tendon.c3 * (lam**p.tendon.c4 - 1) / lam**2 if lam >= 1 else 0.0
         phi = muscle_fraction * phi_m + (1 - muscle_fraction) * phi_t
         S11 = B1 + B2 * lam**2 + B3 / lam**2 + phi
@@ -117,7 +118,8 @@ def small_spindle():
 def test_newton_converges_quadratically(small_spindle, capsys):
     mesh = small_spindle
     solver = QuasiStaticSolver(
-        mesh, spindle_material(mesh), [Dirichlet("origin", mesh.node_sets["origin"]), Dirichlet("insertion", mesh.node_sets["insertion"])]
+        mesh, spindle_material(mesh),
+        [Dirichlet("origin", mesh.node_sets["origin"]), Dirichlet("insertion", mesh.node_sets["insertion"])]
     )
     solution = solver.solve(0.5)
     history = solution.statistics.residual_histories[-1]
@@ -138,7 +140,8 @@ def test_newton_converges_quadratically(small_spindle, capsys):
 def test_activated_spindle_shortens_belly_fibres_and_bulges(small_spindle):
     mesh = small_spindle
     solver = QuasiStaticSolver(
-        mesh, spindle_material(mesh), [Dirichlet("origin", mesh.node_sets["origin"]), Dirichlet("insertion", mesh.node_sets["insertion"])]
+        mesh, spindle_material(mesh),
+        [Dirichlet("origin", mesh.node_sets["origin"]), Dirichlet("insertion", mesh.node_sets["insertion"])]
     )
     solution = solver.solve(1.0)
     u = solution.displacement.ravel()
@@ -158,7 +161,8 @@ def test_activated_spindle_shortens_belly_fibres_and_bulges(small_spindle):
     r0 = np.linalg.norm(X[mid, :2], axis=1)
     r1 = np.linalg.norm((X + solution.displacement[surface])[mid, :2], axis=1)
     area_ratio = (r1.mean() / r0.mean()) ** 2
-    print(f"belly fibre stretch {stretch[belly].mean():.3f}, mid cross-section area x{area_ratio:.3f}, max|J-1| {solution.max_volume_change:.2e}")
+    print(f"belly fibre stretch {stretch[belly].mean():.3f}, mid cross-section area x{area_ratio:.3f}, "
+          f"max|J-1| {solution.max_volume_change:.2e}")
     assert area_ratio > 1.02
     assert solution.max_volume_change < 0.01
 
@@ -174,7 +178,7 @@ def test_tip_displacement_converges_under_mesh_refinement(capsys):
     d1, d2 = abs(tips[0] - tips[1]), abs(tips[1] - tips[2])
     rate = np.log(d1 / d2) / np.log(sizes[0] / sizes[1])
     with capsys.disabled():
-        print(f"\nmesh convergence: tip displacement {['%.5f' % t for t in tips]} mm at h = {sizes} mm; observed rate {rate:.2f}")
+        print(f"\nmesh convergence: tip displacement {[f'{t:.5f}' for t in tips]} mm at h = {sizes} mm; observed rate {rate:.2f}")
     assert tips[0] < 0  # the activated muscle shortens
     assert d2 < d1
     assert abs(tips[2] - tips[1]) < 0.02 * abs(tips[2])

@@ -9,6 +9,7 @@ import typer
 
 from persival.campaign.options import build_design, build_spec
 from persival.cli_errors import check_output_dir, user_errors
+from persival.cli_help import FullHelpGroup
 
 _SIMULATOR_HELP = ("Simulator kind: arm (the built-in FE model), analytic (closed-form test model) "
                    "or external.")
@@ -17,7 +18,7 @@ _SIMULATOR_HELP = ("Simulator kind: arm (the built-in FE model), analytic (close
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     """Attach this stage's commands to the main app (``bench_app``: no benchmark here)."""
     campaign_app = typer.Typer(
-        help="Simulation campaigns: run a simulator over a design into a store.", no_args_is_help=True)
+        cls=FullHelpGroup, help="Simulation campaigns: run a simulator over a design into a store.", no_args_is_help=True)
     app.add_typer(campaign_app, name="campaign")
 
     @campaign_app.command("run")

@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from persival.campaign.simulator import (
-    SimulatorSpec,
     SimulationTimeout,
+    SimulatorSpec,
     cached_simulator,
     forget_cached_simulator,
 )

@@ -97,7 +97,9 @@ def run_campaign(
     factory = simulator_factory(spec.kind)  # unknown kind: clear error before anything is written
     store_path = Path(store_path)
     if store_path.exists():
-        store = CampaignStore.open_for_writing(store_path)
+        with CampaignStore.open(store_path) as existing:  # read-only: a mismatch leaves the store untouched
+            existing.check_matches(design, spec)
+        store = CampaignStore.open_for_writing(store_path)  # and again under the lock, below
         try:
             store.check_matches(design, spec)
         except BaseException:
@@ -296,8 +298,15 @@ class _Progress:
 
     def __enter__(self) -> _Progress:
         if self.enabled:
-            from rich.progress import (BarColumn, MofNCompleteColumn, Progress, ProgressColumn,
-                                       TextColumn, TimeElapsedColumn, TimeRemainingColumn)
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                Progress,
+                ProgressColumn,
+                TextColumn,
+                TimeElapsedColumn,
+                TimeRemainingColumn,
+            )
             from rich.text import Text
 
             class RateColumn(ProgressColumn):

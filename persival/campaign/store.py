@@ -112,7 +112,7 @@ def _dumps(obj: Any) -> str:
 
 
 def _now() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
 
 
 class CampaignStore:
@@ -150,8 +150,10 @@ class CampaignStore:
             raise StoreError(f"{path} already exists")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
+        except (FileExistsError, NotADirectoryError):
+            raise StoreError(f"cannot create {path}: a file is in the way of its folder {path.parent}") from None
         except OSError as exc:
-            raise StoreError(f"cannot create the parent directory of {path}: {exc}") from None
+            raise StoreError(f"cannot create the parent directory of {path}: {(exc.strerror or str(exc)).lower()}") from None
         tmp = path.with_name(f".{path.name}.creating-{os.getpid()}")
         if tmp.exists():
             shutil.rmtree(tmp)
@@ -372,7 +374,7 @@ class CampaignStore:
         st["statistics"][index] = _dumps(statistics)
         st["wall_time_s"][index] = float(wall_time_s)
         st["attempts"][index] = int(attempts)
-        st["finished_at"][index] = _dt.datetime.now(_dt.timezone.utc).timestamp()
+        st["finished_at"][index] = _dt.datetime.now(_dt.UTC).timestamp()
 
     # ---- reading -----------------------------------------------------------------------------
     def status_codes(self) -> np.ndarray:

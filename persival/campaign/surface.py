@@ -64,7 +64,7 @@ def boundary_triangles(blocks: list[tuple[str, np.ndarray]]) -> np.ndarray:
         for face in faces:
             faces_by_size[len(face)].append(conn[:, face])
     out = []
-    for size, parts in faces_by_size.items():
+    for parts in faces_by_size.values():
         if not parts:
             continue
         faces = np.concatenate(parts)

@@ -77,12 +77,12 @@ def run_benchmark(
         grid.predict(pool1[0], dtype=dt)  # casts the coefficients once, outside the timing
         for what, fn in (("predict", grid.predict), ("gradient", grid.gradient)):
             it1 = iter(range(len(pool1)))
-            s1, m1 = _time_per_call(lambda: fn(pool1[next(it1)], dtype=dt), reps_single, 20)
+            s1, m1 = _time_per_call(lambda fn=fn, it=it1, dt=dt: fn(pool1[next(it)], dtype=dt), reps_single, 20)
             rows.append(BenchRow(what, np.dtype(dt).name, 1, s1, m1, reps_single))
             if what == "gradient":
                 continue  # batch gradients are (batch, 8428, 5): memory, not a per-state story
             itb = iter(range(len(poolb)))
-            sb, mb = _time_per_call(lambda: fn(poolb[next(itb)], dtype=dt), reps_batch, 1)
+            sb, mb = _time_per_call(lambda fn=fn, it=itb, dt=dt: fn(poolb[next(it)], dtype=dt), reps_batch, 1)
             rows.append(BenchRow(what, np.dtype(dt).name, batch, sb / batch, mb / batch, reps_batch))
     return BenchResult(grid.n_points, n_out, t1 - t0, t2 - t1, rows)
 

@@ -54,7 +54,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             arm = ArmModel(model, profile)
         with Progress(console=console) as bar:
             task = bar.add_task("muscle sweeps", total=10)
-            data = muscle_curves(arm, progress=lambda name, a: bar.update(task, advance=1, description=f"{name} at activation {a:g}"))
+            data = muscle_curves(
+                arm, progress=lambda name, a: bar.update(task, advance=1, description=f"{name} at activation {a:g}"))
         table = Table(title="equilibria predicted by the curves (persival simulate solves them exactly)")
         table.add_column("activations")
         table.add_column("elbow angle (deg)", justify="right")
@@ -64,14 +65,16 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             table.add_row(label, f"{predicted[label]:.1f}")
         console.print(table)
         out.mkdir(parents=True, exist_ok=True)
-        serial = {k: (v.tolist() if isinstance(v, np.ndarray) else {kk: vv.tolist() for kk, vv in v.items()}) for k, v in data.items()}
+        serial = {k: (v.tolist() if isinstance(v, np.ndarray) else {kk: vv.tolist() for kk, vv in v.items()})
+                  for k, v in data.items()}
         (out / "curves.json").write_text(json.dumps({"profile": profile, "curves": serial, "predicted_deg": predicted}, indent=1))
         console.print(f"wrote {out / 'curves.json'} and {plot_curves(data, out / 'curves.png')}")
 
     @app.command()
     def accuracy(
         test: Path = typer.Option(..., "--test", help="Campaign store of held-out FE states (e.g. a random design)."),
-        surrogate: list[str] = typer.Option(..., "--surrogate", help="LABEL=DIR of a fitted surface surrogate (fit-sg or adapt), repeatable."),
+        surrogate: list[str] = typer.Option(
+            ..., "--surrogate", help="LABEL=DIR of a fitted surface surrogate (fit-sg or adapt), repeatable."),
         out: Path = typer.Option(Path("results/accuracy"), "--out", help="Output directory (accuracy.json, accuracy.png)."),
     ) -> None:
         """Surrogates vs held-out FE states: MaxAE, MAE, MaxRE, MRE (SPEC 7) and elbow-angle error."""
@@ -91,6 +94,9 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                 label, sep, path = item.partition("=")
                 if not sep or not label or not path:
                     raise ValueError(f"--surrogate expects LABEL=DIR, got {item!r}")
+                if not (Path(path) / "surrogate.json").is_file():
+                    raise ValueError(f"--surrogate {item}: {path} is not a fitted surrogate (no surrogate.json; "
+                                     "make one with `persival surrogate fit-sg` or `surrogate adapt`)")
                 labelled[label] = Path(path)
             report = accuracy_report(labelled, test)
         table = Table(title=f"surface surrogates vs {report['test_states']} held-out FE states ({test})")
@@ -111,15 +117,19 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
 
     @bench_app.command("fe")
     def bench_fe(
-        mesh_size: float = typer.Option(6.3, help="Element size of the 40 x 300 mm spindle (mm)."),
+        mesh_size: float = typer.Option(6.3, min=1.0, help="Element size of the 40 x 300 mm spindle (mm)."),
         activation: float = typer.Option(1.0, min=0.0, max=1.0, help="Activation of the benchmark state."),
         repeats: int = typer.Option(5, min=1, help="Repetitions per timing (best is kept)."),
         backend: str = typer.Option("auto", help="Sparse solver: auto, pardiso or scipy."),
     ) -> None:
         """Newton iteration vs sparse factorization on the paper-size spindle (target ratio <= 1.5)."""
         from persival.evaluate.bench_fe import print_fe_benchmark, run_fe_benchmark
+        from persival.model.linear_solver import SparseSymmetricSolver
 
-        print_fe_benchmark(run_fe_benchmark(mesh_size, activation, repeats, backend))
+        with user_errors(RuntimeError):  # RuntimeError: pardiso asked for but not installed
+            SparseSymmetricSolver(backend)  # an unknown backend fails here, before the meshing
+            result = run_fe_benchmark(mesh_size, activation, repeats, backend)
+        print_fe_benchmark(result)
 
     @bench_app.command("sg")
     def bench_sg(

@@ -42,7 +42,8 @@ def render_states(directories: list[str | Path], out: str | Path, window: tuple[
     lo = np.min([p.min(axis=0) for p in everything], axis=0)
     hi = np.max([p.max(axis=0) for p in everything], axis=0)
     top = max(float(np.max(m["displacement_magnitude"])) for muscles, _ in meshes for m in muscles)
-    plotter = pv.Plotter(off_screen=True, shape=(1, len(directories)), window_size=(window[0] * len(directories), window[1]), border=False)
+    plotter = pv.Plotter(off_screen=True, shape=(1, len(directories)),
+                         window_size=(window[0] * len(directories), window[1]), border=False)
     for k, ((muscles, bones), summary) in enumerate(zip(meshes, summaries)):
         plotter.subplot(0, k)
         for bone in bones:

@@ -19,9 +19,9 @@ import numpy as np
 from persival.model.arm_file import Muscle, load_model_file
 from persival.model.assembly import MaterialField
 from persival.model.constraints import Hinge
-from persival.model.muscle_unit import MuscleState, MuscleUnit, line_rotation
 from persival.model.geometry import swept_solid_mesh
 from persival.model.mesh import Tet10Mesh
+from persival.model.muscle_unit import MuscleState, MuscleUnit, line_rotation
 from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
 from persival.vocabulary import MUSCLES, check_activation_vector
 
@@ -124,7 +124,8 @@ class ArmModel:
             node_sets={end: self.mesh.node_sets[f"{muscle.name}/{end}"] - nodes[0] for end in ("origin", "insertion")},
         )
         mf = self.material
-        material = MaterialField(mf.fibre[cells], mf.muscle_fraction[cells], mf.bulk_modulus[cells], mf.fibre_prestretch[cells], mf.parameters)
+        material = MaterialField(mf.fibre[cells], mf.muscle_fraction[cells], mf.bulk_modulus[cells],
+                                 mf.fibre_prestretch[cells], mf.parameters)
         insertion = self.forearm_point(muscle.insertion, muscle.mesh_angle_deg)
         return MuscleUnit(muscle.name, mesh, material, muscle.origin, insertion, self.options)
 

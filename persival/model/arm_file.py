@@ -126,12 +126,14 @@ class ArmModelFile(_Strict):
         if missing or extra or len(names) != len(set(names)):
             raise ValueError(
                 f"the model needs exactly the muscles {', '.join(MUSCLES)}; "
-                f"missing: {missing or 'none'}, unknown or repeated: {extra or [n for n in names if names.count(n) > 1] or 'none'}"
+                f"missing: {missing or 'none'}, "
+                f"unknown or repeated: {extra or [n for n in names if names.count(n) > 1] or 'none'}"
             )
         lo, hi = self.joint.limits_deg
         for m in self.muscles:
             if not lo <= m.mesh_angle_deg <= hi:
-                raise ValueError(f"muscle {m.name!r}: mesh_angle_deg {m.mesh_angle_deg} lies outside the joint limits {self.joint.limits_deg}")
+                raise ValueError(f"muscle {m.name!r}: mesh_angle_deg {m.mesh_angle_deg} lies outside the joint limits "
+                                 f"{self.joint.limits_deg}")
         for bone in self.bones:
             if bone.segment != "upper_arm":
                 continue

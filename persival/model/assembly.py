@@ -17,10 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-
-from persival.model import tet10
 from numba import njit, prange
 
+from persival.model import tet10
 from persival.model.material import DEFAULT_PARAMETERS, MaterialParameters, _law_point
 from persival.model.mesh import Tet10Mesh
 
@@ -48,7 +47,7 @@ class MaterialField:
         fibre_prestretch=1.0,
         n_cells: int | None = None,
         parameters: MaterialParameters = DEFAULT_PARAMETERS,
-    ) -> "MaterialField":
+    ) -> MaterialField:
         fibre = np.asarray(fibre, dtype=float)
         m = n_cells if n_cells is not None else (len(fibre) if fibre.ndim == 2 else None)
         if m is None:

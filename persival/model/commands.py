@@ -10,7 +10,7 @@ from persival.cli_errors import check_output_dir, user_errors
 from persival.model.defaults import profiles_help
 from persival.vocabulary import MUSCLES, N_ACTIVATIONS
 
-ACTIVATIONS_HELP = f"{N_ACTIVATIONS} comma-separated activations in [0, 1]: {','.join(MUSCLES)}."
+ACTIVATIONS_HELP = f"{N_ACTIVATIONS} comma-separated activations in [0, 1], in the order {', '.join(MUSCLES)}; e.g. 0.5,0,0,0,0."
 
 
 def parse_activations(text: str) -> list[float]:
@@ -63,6 +63,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             write_state(arm, state, out)
         console.print(
             f"elbow angle [bold]{state.elbow_angle_deg:.2f} deg[/bold], moment residual {state.moment_residual:.2e} N mm, "
-            f"{state.statistics['iterations']} Newton iterations, {state.wall_time_s:.1f} s, max |J-1| {state.max_volume_change:.2e}"
+            f"{state.statistics['iterations']} Newton iterations, {state.wall_time_s:.1f} s, "
+            f"max |J-1| {state.max_volume_change:.2e}"
         )
         console.print(f"wrote {out}/state.json and VTU files (open {out}/*.vtu in ParaView)")

@@ -1,7 +1,8 @@
 """Boundary sets of the quasi-static problem: prescribed displacements and rigid-body ties.
 
 A constraint owns a set of nodes and tells, for a load factor t in [0, 1], the displacement
-of those nodes (a free hinge also adds its angle to the unknowns). The solver eliminates their degrees of freedom and reports the reaction
+of those nodes (a free hinge also adds its angle to the unknowns). The solver eliminates their degrees of freedom
+and reports the reaction
 (force, and moment about the tie's centre) that the constraint exerts on the body.
 """
 
@@ -90,7 +91,8 @@ class Hinge:
         if self.muscle_lines is not None:
             O, I, is_insertion = self.muscle_lines
             per_point = lambda v: np.broadcast_to(np.asarray(v, dtype=float), nodes.shape + (3,))[order].copy()  # noqa: E731
-            self.muscle_lines = (per_point(O), per_point(I), np.broadcast_to(np.asarray(is_insertion, dtype=bool), nodes.shape)[order].copy())
+            insertion = np.broadcast_to(np.asarray(is_insertion, dtype=bool), nodes.shape)[order].copy()
+            self.muscle_lines = (per_point(O), per_point(I), insertion)
         if self.free:
             if np.ndim(self.start_deg) != 0:
                 raise ValueError(f"hinge {self.name!r}: a free hinge has one start angle")

@@ -137,7 +137,7 @@ class Tet10Mesh:
         self.to_meshio(displacement, point_data).write(str(path))
 
     @classmethod
-    def read(cls, path: str | Path) -> "Tet10Mesh":
+    def read(cls, path: str | Path) -> Tet10Mesh:
         """Read any meshio format holding tetra10 cells."""
         import meshio
 

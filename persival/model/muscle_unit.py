@@ -86,7 +86,8 @@ class MuscleUnit:
         self.assembler = Tet10Assembler(mesh)
         self._origin_face = Dirichlet("origin", mesh.node_sets["origin"])
         self._insertion_face = Dirichlet("insertion", mesh.node_sets["insertion"])
-        self.solver = QuasiStaticSolver(mesh, material, [self._origin_face, self._insertion_face], options, assembler=self.assembler)
+        self.solver = QuasiStaticSolver(mesh, material, [self._origin_face, self._insertion_face], options,
+                                        assembler=self.assembler)
         # the insertion face's unit axial translation: dx/dL of the constrained DOFs
         self._axial = np.zeros(self.assembler.n_dofs)
         self._axial[self._insertion_face.dofs] = np.tile(self.direction, len(self._insertion_face.nodes))

@@ -21,7 +21,6 @@ from persival.model.constraints import Dirichlet, Hinge
 from persival.model.linear_solver import SingularMatrixError, SparseSymmetricSolver
 from persival.model.mesh import Tet10Mesh
 
-
 log = logging.getLogger(__name__)
 
 
@@ -264,7 +263,8 @@ class QuasiStaticSolver:
         history = [norm]
 
         def converged():
-            return norm <= tolerance and abs(r_theta) <= max(opts.moment_atol, opts.rtol * self._moment_length * scale if self.hinge else 0.0)
+            moment_tolerance = max(opts.moment_atol, opts.rtol * self._moment_length * scale if self.hinge else 0.0)
+            return norm <= tolerance and abs(r_theta) <= moment_tolerance
 
         for _ in range(opts.max_iterations):
             if converged():
@@ -306,7 +306,8 @@ class QuasiStaticSolver:
                     r_theta_t = self._hinge_terms(trial, theta_t, f=f_t)[0] if self.hinge else 0.0
                     norm_t = self._residual_norm(f_t, r_theta_t)
                     slope = float(du @ f_t[self.free]) + (np.radians(dtheta) * r_theta_t if self.hinge else 0.0)
-                    if norm_t < (1.0 - 1e-4 * eta) * norm or norm_t <= tolerance or (slope0 < 0 and abs(slope) <= 0.5 * abs(slope0)):
+                    flattened = slope0 < 0 and abs(slope) <= 0.5 * abs(slope0)
+                    if norm_t < (1.0 - 1e-4 * eta) * norm or norm_t <= tolerance or flattened:
                         break
                     if slope0 < 0 < slope:  # overshot the minimum along d: interpolate
                         eta = min(max(eta * slope0 / (slope0 - slope), 0.1 * eta), 0.9 * eta)
@@ -340,8 +341,10 @@ class QuasiStaticSolver:
         """
         m = self.mesh.n_cells
         target = self._validated_activation(activation, "activation")
-        start = target * 0.0 if initial_activation is None else self._validated_activation(initial_activation, "initial_activation")
-        u = np.zeros(self.assembler.n_dofs) if initial_displacement is None else np.asarray(initial_displacement, dtype=float).reshape(-1).copy()
+        start = (target * 0.0 if initial_activation is None
+                 else self._validated_activation(initial_activation, "initial_activation"))
+        u = (np.zeros(self.assembler.n_dofs) if initial_displacement is None
+             else np.asarray(initial_displacement, dtype=float).reshape(-1).copy())
         if u.shape != (self.assembler.n_dofs,) or not np.all(np.isfinite(u)):
             raise ValueError("initial_displacement must be a finite (n_nodes, 3) array")
         theta = None

@@ -1,0 +1,153 @@
+"""Every subcommand, given bad input, answers as a newcomer should meet it (issue 16).
+
+Exit code 2; stderr a single line starting with ``error:`` (or typer's usage-error box for a
+malformed option); no traceback; and the working folder exactly as it was. Every input here
+fails validation before any FE work, so the walk takes seconds.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import typer
+from typer.testing import CliRunner
+
+from persival.cli import app
+
+BOX = "usage box"  # expected answer: typer's usage error (malformed or out-of-range option)
+
+# (command, arguments, what is wrong, expected: BOX or a fragment of the one-line error)
+CASES = [
+    ("run", ["--profile", "nosuch", "--out", "new"], "unknown profile", "unknown profile 'nosuch'"),
+    ("run", ["--out", "afile"], "file where a folder is expected", "is a file, not a folder"),
+    ("simulate", ["-a", "1.5,0,0,0,0", "--out", "new"], "out of range", "biceps = 1.5"),
+    ("simulate", ["-a", "0,nan,0,0,0", "--out", "new"], "not finite", "not finite"),
+    ("simulate", ["-a", "0.5,x", "--out", "new"], "malformed", BOX),
+    ("simulate", ["-a", "0.5,0,0", "--out", "new"], "too few values", BOX),
+    ("simulate", ["-a", "0,0,0,0,0", "--model", "nosuch.toml", "--out", "new"], "missing file", "no such file"),
+    ("simulate", ["-a", "0,0,0,0,0", "--model", "folder", "--out", "new"], "folder where a file is expected",
+     "is a directory"),
+    ("simulate", ["-a", "0,0,0,0,0", "--model", "foreign.toml", "--out", "new"], "foreign model file", "invalid model file"),
+    ("simulate", ["-a", "0,0,0,0,0", "--out", "afile"], "file where a folder is expected", "is a file, not a folder"),
+    ("render", ["nosuch", "--out", "new.png"], "missing state folder", "not a state directory"),
+    ("render", ["afile", "--out", "new.png"], "file where a state folder is expected", "not a state directory"),
+    ("render", ["folder", "--out", "folder"], "folder where a file is expected", "is a folder, not a file"),
+    ("curves", ["--profile", "nosuch", "--out", "new"], "unknown profile", "unknown profile 'nosuch'"),
+    ("curves", ["--model", "afile", "--out", "new"], "malformed model file", "not valid TOML"),
+    ("curves", ["--out", "afile"], "file where a folder is expected", "is a file, not a folder"),
+    ("accuracy", ["--test", "random.zarr", "--surrogate", "x=nosuch", "--out", "new"], "missing surrogate",
+     "not a fitted surrogate"),
+    ("accuracy", ["--test", "random.zarr", "--surrogate", "x=random.zarr", "--out", "new"], "a store given as surrogate",
+     "not a fitted surrogate"),
+    ("accuracy", ["--test", "random.zarr", "--surrogate", "nosuch", "--out", "new"], "malformed LABEL=DIR", "expects LABEL=DIR"),
+    ("accuracy", ["--test", "random.zarr", "--surrogate", "x=folder", "--out", "afile"], "file where a folder is expected",
+     "is a file, not a folder"),
+    ("bench fe", ["--activation", "2"], "out of range", BOX),
+    ("bench fe", ["--activation", "nan"], "not finite", BOX),
+    ("bench fe", ["--backend", "nosuch"], "unknown backend", "unknown sparse solver backend"),
+    ("bench fe", ["--mesh-size", "0"], "out of range", BOX),
+    ("bench sg", ["--degree", "2"], "even degree", "positive odd integer"),
+    ("bench sg", ["--level", "0"], "out of range", BOX),
+    ("campaign run", ["--store", "new.zarr", "--simulator", "analytic", "--level", "0"], "out of range", "level must be"),
+    ("campaign run", ["--store", "new.zarr", "--simulator", "nosuch"], "unknown simulator", "unknown simulator kind"),
+    ("campaign run", ["--store", "new.zarr", "--simulator", "analytic", "--design", "nosuch.csv"], "missing design file",
+     "does not exist"),
+    ("campaign run", ["--store", "new.zarr", "--simulator", "analytic", "--design", "bad.csv"], "design out of range",
+     "anconeus = 1.5"),
+    ("campaign run", ["--store", "new.zarr", "--simulator", "analytic", "--design", "nan.csv"], "design not finite",
+     "not finite"),
+    ("campaign run", ["--store", "new.zarr", "--simulator", "analytic", "--option", "oops"], "malformed option", "KEY=VALUE"),
+    ("campaign run", ["--store", "new.zarr", "--simulator", "analytic", "--timeout", "nan"], "not finite",
+     "timeout_s must be"),
+    ("campaign run", ["--store", "afile", "--simulator", "analytic"], "file where a store is expected", "not a campaign store"),
+    ("campaign run", ["--store", "afile/new.zarr", "--simulator", "analytic"], "file in the way of the folder",
+     "a file is in the way"),
+    ("campaign run", ["--store", "random.zarr", "--design", "sparse-grid", "--level", "1"], "foreign design for the store",
+     "design: store has 3 points"),
+    ("campaign status", ["--store", "nosuch.zarr"], "missing store", "does not exist"),
+    ("campaign status", ["--store", "folder"], "folder that is not a store", "not a campaign store"),
+    ("campaign export", ["--store", "nosuch.zarr", "--out", "new"], "missing store", "does not exist"),
+    ("campaign export", ["--store", "random.zarr", "--out", "afile"], "file where a folder is expected",
+     "is a file, not a folder"),
+    ("surrogate fit-sg", ["--store", "nosuch.zarr", "--out", "new"], "missing store", "does not exist"),
+    ("surrogate fit-sg", ["--store", "random.zarr", "--out", "new"], "foreign store (random design)", "sparse-grid"),
+    ("surrogate fit-sg", ["--store", "random.zarr", "--out", "afile"], "file where a folder is expected",
+     "is a file, not a folder"),
+    ("surrogate adapt", ["--out", "new", "--max-points", "40", "--simulator", "analytic", "--seed-store", "nosuch.zarr"],
+     "missing seed store", "does not exist"),
+    ("surrogate adapt", ["--out", "new", "--max-points", "40", "--seed-store", "random.zarr"],
+     "foreign seed store (analytic, not arm)", "computed with"),
+    ("surrogate adapt", ["--out", "new", "--max-points", "0", "--simulator", "analytic"], "out of range", BOX),
+    ("surrogate adapt", ["--out", "new", "--max-points", "40", "--simulator", "analytic", "--norm", "l7"], "unknown norm",
+     "norm must be"),
+    ("surrogate adapt", ["--out", "new", "--max-points", "40", "--simulator", "nosuch"], "unknown simulator", "arm or analytic"),
+    ("surrogate adapt", ["--out", "afile", "--max-points", "40", "--simulator", "analytic"], "file where a folder is expected",
+     "is a file, not a folder"),
+    ("serve", ["--artifacts", "nosuch"], "missing export folder", "no such artifact folder"),
+    ("serve", ["--artifacts", "folder", "--port", "70000"], "out of range", BOX),
+    ("bench serve", ["--artifacts", "nosuch", "--duration", "1"], "missing export folder", "no such artifact folder"),
+]
+
+
+def leaf_commands(group=None, prefix: str = "") -> set[str]:
+    """Every runnable subcommand of the app, e.g. "campaign run"."""
+    group = group or typer.main.get_command(app)
+    names = set()
+    for name, command in group.commands.items():
+        full = f"{prefix} {name}".strip()
+        names |= leaf_commands(command, full) if hasattr(command, "commands") else {full}
+    return names
+
+
+def snapshot(folder: Path) -> dict[str, tuple[int, int]]:
+    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns) for p in folder.rglob("*")}
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory):
+    """A folder with the inputs the cases name: a file, a folder, model and design files, a store."""
+    from persival.campaign.design import Design
+    from persival.campaign.runner import INLINE, run_campaign
+    from persival.campaign.simulator import SimulatorSpec
+
+    root = tmp_path_factory.mktemp("walk")
+    (root / "afile").write_text("not a folder\n")
+    (root / "folder").mkdir()
+    (root / "foreign.toml").write_text('name = "a table that is no arm"\n[bones]\nradius = 3\n')
+    (root / "bad.csv").write_text("0.1,0.2,0.3,0.4,1.5\n")
+    (root / "nan.csv").write_text("0.1,0.2,nan,0.4,0.5\n")
+    run_campaign(root / "random.zarr", Design.random(3, seed=0), SimulatorSpec("analytic", {}), scheduler=INLINE, progress=False)
+    return root
+
+
+def test_every_subcommand_has_a_bad_input():
+    missing = leaf_commands() - {command for command, *_ in CASES}
+    assert not missing, f"add a bad-input case to tests/test_cli_errors.py for: {sorted(missing)}"
+
+
+def test_bad_inputs_are_one_line_errors_and_leave_nothing(workdir, monkeypatch, capsys):
+    monkeypatch.chdir(workdir)
+    runner = CliRunner()
+    rows = []
+    for command, args, what, expected in CASES:
+        before = snapshot(workdir)
+        result = runner.invoke(app, [*command.split(), *args])
+        stderr = result.stderr.strip()
+        label = f"persival {command} {' '.join(args)}"
+        assert result.exception is None or isinstance(result.exception, SystemExit), f"{label}: {result.exc_info}"
+        assert result.exit_code == 2, f"{label}: exit {result.exit_code}\n{result.output}"
+        assert "Traceback" not in result.output, label
+        if expected is BOX:
+            assert "Usage:" in stderr and "Error" in stderr, f"{label}: no usage error\n{stderr}"
+            message = next(line.strip("│ ") for line in stderr.splitlines() if "Invalid value" in line or "Missing" in line)
+        else:
+            assert len(stderr.splitlines()) == 1 and stderr.startswith("error: "), f"{label}: not one line\n{stderr}"
+            assert expected in stderr, f"{label}: {stderr!r} lacks {expected!r}"
+            message = stderr
+        assert snapshot(workdir) == before, f"{label} changed the working folder"
+        rows.append((f"{command} {' '.join(args)}", what, message))
+    with capsys.disabled():  # the count shows in every run; the table with -s
+        print(f"\n{len(rows)} bad inputs tried over {len(leaf_commands())} subcommands: exit 2, one short message, nothing left")
+    for command, what, message in rows:
+        print(f"  persival {command:<90.90} | {what:<38} | {message}")
