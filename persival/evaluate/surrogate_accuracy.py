@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.figures import save_figure
 from persival.evaluate.metrics import state_errors, summarize
+from persival.figures import save_figure
 from persival.surrogate.sparse_grid import SparseGrid
 from persival.surrogate.surface_surrogate import SurfaceSurrogate
 
@@ -95,8 +95,8 @@ def accuracy_report(surrogates: dict[str, str | Path], test_store: str | Path) -
     test = load_held_out(test_store, muscles.pop())
     rows, paths = {}, {}
     for label, surrogate in loaded.items():
-        rows[label] = {"fe_states": surrogate.grid.n_points,
-                       "kind": "adaptive" if "adaptive" in surrogate.metadata else f"regular level {surrogate.metadata.get('level')}",
+        kind = "adaptive" if "adaptive" in surrogate.metadata else f"regular level {surrogate.metadata.get('level')}"
+        rows[label] = {"fe_states": surrogate.grid.n_points, "kind": kind,
                        **summarize(surrogate_errors(surrogate, test))}
         path = refinement_path(surrogate)
         if path:
