@@ -162,3 +162,23 @@ def test_bad_inputs_are_one_line_errors_and_leave_nothing(workdir, monkeypatch, 
         print(f"\n{len(rows)} bad inputs tried over {len(leaf_commands())} subcommands: exit 2, one short message, nothing left")
     for command, what, message in rows:
         print(f"  persival {command:<90.90} | {what:<38} | {message}")
+
+
+def test_internal_errors_are_one_line_unless_debug():
+    from persival.cli_errors import ErrorReportingGroup
+
+    demo = typer.Typer(cls=ErrorReportingGroup)
+
+    @demo.callback()
+    def main(debug: bool = typer.Option(False, "--debug")) -> None:
+        """Like persival's main app."""
+
+    @demo.command()
+    def boom() -> None:
+        raise RuntimeError("a bug")
+
+    result = CliRunner().invoke(demo, ["boom"])
+    assert result.exit_code == 1 and result.stderr.startswith("internal error: RuntimeError: a bug")
+    assert len(result.stderr.splitlines()) == 1 and "--debug" in result.stderr
+    result = CliRunner().invoke(demo, ["--debug", "boom"])
+    assert isinstance(result.exception, RuntimeError)  # re-raised: typer prints its traceback
