@@ -13,7 +13,7 @@ import os
 import shutil
 import sys
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 
 import typer
@@ -121,7 +121,8 @@ class ErrorReportingGroup(FullHelpGroup):
         except _PASS_THROUGH:
             raise
         except BrokenPipeError:  # the reader went away (`persival --help | head`): nothing to report
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nor at interpreter exit
+            with suppress(OSError):  # no real stdout (a test runner): nothing to silence
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nor at interpreter exit
             raise typer.Exit(EXIT_INTERNAL_ERROR) from None
         except Exception as exc:
             if ctx.params.get("debug"):
