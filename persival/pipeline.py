@@ -1,178 +1,111 @@
-"""`persival run`: the end-to-end job over the stages that exist, each reading the last one's artifact.
+"""`persival run`: the end-to-end job, one stage after the other, each reading the last one's artifact.
 
-1. model     - validate and mesh the built-in arm (quick profile): reference VTU + geometry.json
-2. FE        - three equilibria of the arm (hanging, biceps 0.5, flexors 1; each from the hanging arm): arm.json, arm/<state>/, arm.png
-3. campaign  - a level-1 sparse-grid campaign (243 states) and 50 random held-out states into zarr
-               stores, with the fast analytic simulator (an arm campaign takes ~30 min: README)
-4. surrogate - B-spline sparse grid fitted to the store (biceps surface + elbow angle): sg_biceps/;
-               an adaptive grid of the same FE budget grown from the store: sg_adaptive/
-5. evaluate  - both against the held-out states, SPEC 7 metrics: accuracy/accuracy.json + .png
+    1 model     OUT/model/     geometry.json, mesh_*.vtu, bone_*.vtu (built-in arm, chosen profile)
+    2 fe        OUT/fe/        three FE equilibria of the arm (state.json + VTU) and arm.png
+    3 campaign  OUT/campaign/  campaign.zarr (sparse-grid design) + held_out.zarr (random states)
+    4 sg        OUT/sg/        B-spline SG of all five muscles' surfaces + the elbow angle
+    5 inverse   OUT/inverse/   activation_model.json (Theta -> alpha_opt) + plot
+    6 data      OUT/data/      SG training data (alpha_opt(Theta) and random alpha)
+    7 train     OUT/networks/  pod/ (all muscles) and paper/ (the paper's net, biceps)
+    8 export    OUT/export/    ONNX models + metadata.json (SPEC 9)
+    9 evaluate  OUT/evaluate/  the paper's tables and figures
+   10 report    OUT/report/    index.html + results.json
+
+Resumable stage by stage: every stage leaves ``OUT/<stage>/stage.json`` with the digest of its
+inputs (its own settings plus the digests of the stages it reads); a stage whose digest is
+unchanged is skipped. The campaign's simulator is named everywhere its numbers appear.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import shutil
 import time
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import numpy as np
+from persival import stages
+
+__all__ = ["RunConfig", "run", "STAGES"]
 
 
-def _write_json(path: Path, data: dict) -> None:
-    path.write_text(json.dumps(data, indent=2, default=float))
+@dataclass
+class RunConfig:
+    profile: str = "quick"
+    simulator: str = "analytic"  # "arm": the campaign on the FE arm (about an hour on 2 cores)
+    level: int = 1  # sparse-grid level of the campaign (1: 243 states, 2: 1053)
+    held_out: int = 25  # random states of the same simulator for the error-propagation table
+    campaign_store: str | None = None  # reuse a finished campaign instead of running one
+    held_out_store: str | None = None
+    samples: int = 4000  # SG training states
+    angle_fraction: float = 0.5
+    pod_folds: int = 5
+    pod_epochs: int = 100
+    paper_folds: int = 1
+    paper_epochs: int = 8
+    seed: int = 0
+    fe_states: bool = True  # the three showcase FE equilibria
 
 
-def model_stage(out: Path, profile: str = "quick") -> dict:
-    import meshio
-
-    from persival.campaign.arm_simulator import muscle_surface
-    from persival.model.arm import ArmModel
-    from persival.model.output import bone_surfaces, muscle_submesh
-
-    t0 = time.perf_counter()
-    arm = ArmModel(profile=profile)
-    geometry = {"model": arm.spec.name, "model_hash": arm.model_hash, "profile": profile, "muscles": {}}
-    for muscle in arm.spec.ordered_muscles():
-        nodes, cells = muscle_submesh(arm, muscle.name)
-        surface, _ = muscle_surface(arm, muscle.name)
-        meshio.Mesh(arm.mesh.points[nodes], [("tetra10", cells)]).write(out / f"mesh_{muscle.name}.vtu")
-        geometry["muscles"][muscle.name] = {
-            "tet10": int(len(cells)),
-            "nodes": int(len(nodes)),
-            "surface_nodes": int(len(surface)),
-            "mesh_angle_deg": muscle.mesh_angle_deg,
-            "fibre_prestretch": muscle.fibre_prestretch,
-            "line_moment_arm_mm": {str(t): round(arm.line_moment_arm(muscle, t), 2) for t in (0, 45, 90, 120, 150)},
-        }
-    for name, (points, triangles) in bone_surfaces(arm, 90.0).items():
-        meshio.Mesh(points, [("triangle", triangles)]).write(out / f"bone_{name}_90deg.vtu")
-    geometry["wall_time_s"] = time.perf_counter() - t0
-    _write_json(out / "geometry.json", geometry)
-    return geometry
+#: (name, what it does, the stages whose artifacts it reads)
+STAGES = [
+    ("model", "validate and mesh the built-in arm", []),
+    ("fe", "three FE equilibria of the arm (hanging, biceps 0.5, flexors 1)", ["model"]),
+    ("campaign", "sparse-grid campaign + random held-out states", []),
+    ("sg", "B-spline sparse grid of five muscle surfaces + elbow angle", ["campaign"]),
+    ("inverse", "least-effort activations: the angle activation model", ["sg"]),
+    ("data", "SG training data at alpha_opt(Theta) and random alpha", ["sg", "inverse"]),
+    ("train", "POD network (five muscles) and the paper's network (biceps)", ["data"]),
+    ("export", "ONNX models + metadata.json", ["train", "inverse"]),
+    ("evaluate", "the paper's accuracy and speed tables", ["export", "campaign", "sg", "train", "data"]),
+    ("report", "HTML report", ["evaluate", "fe", "model"]),
+]
 
 
-ARM_STATES = {
-    "hanging": (0.0, 0.0, 0.0, 0.0, 0.0),
-    "biceps_half": (0.5, 0.0, 0.0, 0.0, 0.0),
-    "flexors_full": (1.0, 1.0, 1.0, 0.0, 0.0),
-}
+def _digest(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
-def arm_stage(out: Path, profile: str = "quick", console=None) -> dict:
-    """Three FE states of the arm, each continued from the hanging arm: state.json + VTU per
-    state, and a picture of the three (``arm.png``).
-
-    Not from each other: from biceps 0.5 (92 deg) the jump to every flexor at 1 activates the
-    slack, bowed brachioradialis at fixed length, a snap-through on which load stepping stalls
-    (docs/arm_model.md); from the hanging arm the same state converges."""
-    from persival.evaluate.render import render_states
-    from persival.model.arm import ArmModel
-    from persival.model.output import write_state
-
-    arm = ArmModel(profile=profile)
-    rows, directories = {}, []
-    hanging = arm.base_state()
-    for name, activations in ARM_STATES.items():
-        state = hanging if not any(activations) else arm.solve(activations, warm_start=hanging)
-        directories.append(write_state(arm, state, out / "arm" / name))
-        rows[name] = {
-            "activations": list(activations),
-            "elbow_angle_deg": state.elbow_angle_deg,
-            "moment_residual_Nmm": state.moment_residual,
-            "newton_iterations": state.statistics["iterations"],
-            "wall_time_s": state.wall_time_s,
-            "max_abs_J_minus_1": state.max_volume_change,
-        }
-        if console is not None:
-            console.print(f"  {name:13s} elbow {state.elbow_angle_deg:6.2f} deg, moment residual {state.moment_residual:.1e} N mm, "
-                          f"{state.statistics['iterations']} Newton iterations, {state.wall_time_s:.1f} s, max|J-1| {state.max_volume_change:.1e}")
-    render_states(directories, out / "arm.png")
-    result = {"profile": profile, "states": rows}
-    _write_json(out / "arm.json", result)
-    return result
+def _stage_inputs(name: str, config: RunConfig, done: dict) -> dict:
+    keys = stages.SETTINGS[name]
+    return {"settings": {k: getattr(config, k) for k in keys}, "upstream": {u: done[u]["digest"] for u in
+                                                                           dict((s[0], s[2]) for s in STAGES)[name]}}
 
 
-def campaign_stage(out: Path, level: int = 1, n_test: int = 50) -> tuple[Path, Path]:
-    """The sparse-grid training campaign and a random held-out campaign of the same simulator."""
-    from persival.campaign.design import Design
-    from persival.campaign.runner import INLINE, run_campaign
-    from persival.campaign.simulator import SimulatorSpec
-
-    spec = SimulatorSpec("analytic", {})
-    store, test = out / "campaign.zarr", out / "held_out.zarr"
-    run_campaign(store, Design.sparse_grid(level), spec, scheduler=INLINE, progress=True)
-    run_campaign(test, Design.random(n_test, seed=1), spec, scheduler=INLINE, progress=True)
-    return store, test
-
-
-def surrogate_stage(out: Path, store_path: Path) -> dict:
-    """The regular SG on the campaign, and an adaptive SG grown to the same FE budget (reusing its states)."""
-    from persival.campaign.store import CampaignStore
-    from persival.surrogate.adaptive_campaign import run_adaptive_campaign
-    from persival.surrogate.surface_surrogate import SurfaceSurrogate
-
-    surrogate = SurfaceSurrogate("biceps").fit(store_path)
-    surrogate.save(out / "sg_biceps")
-    with CampaignStore.open(store_path) as store:
-        spec = store.spec
-    adaptive = run_adaptive_campaign(out / "sg_adaptive", spec, max_points=surrogate.grid.n_points,
-                                     seed_stores=[store_path], progress=False)
-    test = np.random.default_rng(0).uniform(0.0, 1.0, (1, 5))
-    surrogate.predict(test, dtype=np.float32)
-    t0 = time.perf_counter()
-    for _ in range(100):
-        surrogate.predict(test, dtype=np.float32)
-    return {
-        **surrogate.metadata,
-        "surface_nodes": surrogate.n_nodes,
-        "adaptive_grid_points": adaptive.surrogate.grid.n_points,
-        "adaptive_states_solved": adaptive.simulated,
-        "predict_ms_per_state_batch1_float32": (time.perf_counter() - t0) / 100 * 1e3,
-    }
-
-
-def evaluate_stage(out: Path, test_store: Path) -> dict:
-    """Both surrogates against the held-out states (SPEC 7 metrics): accuracy.json + accuracy.png."""
-    from persival.evaluate.surrogate_accuracy import accuracy_report, plot_accuracy
-
-    report = accuracy_report({"regular": out / "sg_biceps", "adaptive": out / "sg_adaptive" / "surrogate"}, test_store)
-    (out / "accuracy").mkdir(exist_ok=True)
-    _write_json(out / "accuracy" / "accuracy.json", report)
-    plot_accuracy(report, out / "accuracy" / "accuracy.png")
-    return report
-
-
-def run(out: Path, profile: str = "quick") -> dict:
+def run(out: str | Path, config: RunConfig | None = None, console=None) -> dict:
+    """Every stage in order; returns {stage: its summary}. ``console``: a rich Console for the log."""
     from rich.console import Console
 
-    console = Console()
+    config = config or RunConfig()
+    console = console or Console()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    console.rule("1/4 model: the built-in arm")
-    geometry = model_stage(out, profile)
-    for name, g in geometry["muscles"].items():
-        console.print(f"  {name:16s} {g['tet10']:5d} tet10, {g['surface_nodes']:5d} surface nodes, moment arm at 90 deg {g['line_moment_arm_mm']['90']:+.1f} mm")
-    console.rule("2/4 FE: the arm hanging, biceps at 0.5, all flexors at 1 (joint equilibrium)")
-    fe = arm_stage(out, profile, console)
-    console.rule("3/5 campaign: level-1 sparse grid + 50 random held-out states (analytic simulator)")
-    store, test_store = campaign_stage(out)
-    console.rule("4/5 surrogate: B-spline sparse grid on the store, and an adaptive one of the same FE budget")
-    report = surrogate_stage(out, store)
-    console.print(f"  regular: {report['grid_points']} points, {report['predict_ms_per_state_batch1_float32']:.3f} ms per state; "
-                  f"adaptive: {report['adaptive_grid_points']} points ({report['adaptive_states_solved']} new states solved)")
-    console.rule("5/5 evaluate: surrogates vs held-out states (SPEC 7)")
-    accuracy = evaluate_stage(out, test_store)
-    for label, row in accuracy["surrogates"].items():
-        console.print(f"  {label:8s} {row['fe_states']:4d} FE states: MaxAE {row['max MaxAE_mm']:.3f} mm, MAE {row['mean MAE_mm']:.3f} mm, "
-                      f"MaxRE {row['max MaxRE_pct']:.2f} %, max angle error {row['max angle_error_deg']:.3f} deg")
-    console.rule("results")
-    console.print(f"  {out}/geometry.json, mesh_*.vtu, bone_*.vtu   (open the VTU files in ParaView)")
-    console.print(f"  {out}/arm.json, {out}/arm/<state>/state.json + VTU, picture {out}/arm.png")
-    console.print(f"  {out}/campaign.zarr   (persival campaign status --store {out}/campaign.zarr)")
-    console.print(f"  {out}/held_out.zarr   (50 random states the surrogates never saw)")
-    console.print(f"  {out}/sg_biceps/, {out}/sg_adaptive/surrogate/ (persival.surrogate.surface_surrogate.SurfaceSurrogate.load)")
-    console.print(f"  {out}/accuracy/accuracy.json, picture {out}/accuracy/accuracy.png")
-    console.print("  viewer: not built yet (see README status)")
-    summary = {"geometry": geometry, "fe": fe, "surrogate": report, "accuracy": accuracy["surrogates"]}
-    _write_json(out / "summary.json", summary)
-    return summary
+    done: dict[str, dict] = {}
+    started = time.perf_counter()
+    active = [s for s in STAGES if config.fe_states or s[0] != "fe"]
+    for k, (name, what, _) in enumerate(active, 1):
+        folder = out / name
+        inputs = _stage_inputs(name, config, done)
+        digest = _digest(inputs)
+        marker = folder / "stage.json"
+        if marker.exists() and json.loads(marker.read_text()).get("digest") == digest:
+            done[name] = json.loads(marker.read_text())
+            console.rule(f"{k}/{len(active)} {name}: {what} [dim](unchanged, skipped)[/dim]")
+            continue
+        console.rule(f"{k}/{len(active)} {name}: {what}")
+        if folder.exists():
+            shutil.rmtree(folder)  # inputs changed: stale artifacts must not mix with new ones
+        folder.mkdir(parents=True)
+        t0 = time.perf_counter()
+        summary = stages.RUNNERS[name](out, config, console)
+        record = {"stage": name, "digest": digest, "inputs": inputs, "wall_time_s": time.perf_counter() - t0,
+                  "summary": summary}
+        marker.write_text(json.dumps(record, indent=2, default=float))
+        done[name] = record
+        console.print(f"  [dim]{name} took {record['wall_time_s']:.1f} s[/dim]")
+    total = time.perf_counter() - started
+    (out / "run.json").write_text(json.dumps({"config": asdict(config), "wall_time_s": total,
+                                              "stages": {n: d["wall_time_s"] for n, d in done.items()}}, indent=2))
+    stages.print_results(out, console, total)
+    return done

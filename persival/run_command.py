@@ -14,18 +14,39 @@ from persival.model.defaults import profiles_help
 def register(app: typer.Typer) -> None:
     @app.command()
     def run(
-        out: Path = typer.Option(Path("results"), "--out", help="Results directory."),
+        out: Path = typer.Option(Path("results"), "--out", help="Results directory (resumed stage by stage)."),
         profile: str = typer.Option(
             "quick", "--profile", help=profiles_help("Mesh profile of the built-in arm", model_option=False)),
+        simulator: str = typer.Option(
+            "analytic", "--simulator", help="Campaign simulator: analytic (closed-form stand-in, seconds) or arm "
+            "(the FE arm: about an hour for level 1 on 2 cores)."),
+        level: int = typer.Option(1, "--level", min=1, max=3, help="Sparse-grid level of the campaign (1: 243, 2: 1053)."),
+        campaign_store: Path = typer.Option(None, "--campaign-store", help="Reuse a finished sparse-grid campaign store."),
+        held_out_store: Path = typer.Option(None, "--held-out-store", help="Reuse a finished held-out campaign store."),
+        held_out: int = typer.Option(25, "--held-out", min=1, help="Random held-out states of the campaign's simulator."),
+        samples: int = typer.Option(4000, "--samples", min=10, help="SG training states for the networks."),
+        pod_epochs: int = typer.Option(100, "--pod-epochs", min=1, help="POD network: epochs per fold (5 folds)."),
+        paper_epochs: int = typer.Option(8, "--paper-epochs", min=1, help="Paper network: epochs (1 fold; the paper: 5 x 400)."),
+        fe_states: bool = typer.Option(True, "--fe-states/--no-fe-states", help="Solve the three showcase FE states."),
     ) -> None:
-        """End to end over the stages that exist: model -> FE -> campaign -> surrogate -> evaluate."""
+        """End to end: model -> FE -> campaign -> SG -> inverse -> data -> train -> export -> evaluate -> report."""
         from persival.model.arm_file import load_model_file
+        from persival.pipeline import RunConfig
         from persival.pipeline import run as run_pipeline
 
         with user_errors():  # before anything is written
             load_model_file()[0].profile(profile)
             check_output_dir(out)
+            if simulator not in ("analytic", "arm"):
+                raise ValueError(f"--simulator must be analytic or arm, got {simulator!r}")
+            for given in (campaign_store, held_out_store):
+                if given is not None and not (given / "zarr.json").is_file():
+                    raise FileNotFoundError(f"{given}: not a campaign store (no zarr.json)")
+            config = RunConfig(profile=profile, simulator=simulator, level=level, held_out=held_out,
+                               campaign_store=None if campaign_store is None else str(campaign_store.resolve()),
+                               held_out_store=None if held_out_store is None else str(held_out_store.resolve()),
+                               samples=samples, pod_epochs=pod_epochs, paper_epochs=paper_epochs, fe_states=fe_states)
         # A user error half-way (e.g. a bad store) removes an output folder this run created;
         # an internal error keeps what was written, for --debug.
         with user_errors(out=out):
-            run_pipeline(out, profile)
+            run_pipeline(out, config)

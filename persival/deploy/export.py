@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import logging
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -48,12 +50,21 @@ def _tiers(float32: Path) -> dict[str, Path]:
     from onnxruntime.quantization import QuantType, quantize_dynamic
 
     half = float32.with_name(float32.stem + ".float16.onnx")
-    # Adds stay float32: they carry the reference coordinates (hundreds of mm) of the last bias
-    model16 = float16.convert_float_to_float16(onnx.load(str(float32)), keep_io_types=True, op_block_list=["Add"])
-    onnx.save(model16, str(half))
     int8 = float32.with_name(float32.stem + ".int8.onnx")
-    # per channel: the POD modes differ in scale by orders of magnitude
-    quantize_dynamic(str(float32), str(int8), weight_type=QuantType.QInt8, per_channel=True)
+    quantization_log = logging.getLogger()  # onnxruntime.quantization advises pre-processing on the root logger
+    level = quantization_log.level
+    with warnings.catch_warnings():
+        # weights below float16's range are flushed to +-1e-7 and say so, once per weight
+        warnings.filterwarnings("ignore", message="the float32 number", category=UserWarning)
+        # Adds stay float32: they carry the reference coordinates (hundreds of mm) of the last bias
+        model16 = float16.convert_float_to_float16(onnx.load(str(float32)), keep_io_types=True, op_block_list=["Add"])
+        onnx.save(model16, str(half))
+        quantization_log.setLevel(logging.ERROR)
+        try:
+            # per channel: the POD modes differ in scale by orders of magnitude
+            quantize_dynamic(str(float32), str(int8), weight_type=QuantType.QInt8, per_channel=True)
+        finally:
+            quantization_log.setLevel(level)
     return {"float32": float32, "float16": half, "int8": int8}
 
 

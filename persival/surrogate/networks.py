@@ -21,6 +21,7 @@ from torch import nn
 
 __all__ = ["ACTIVATIONS", "paper_widths", "PaperNet", "PodNet", "pod_basis", "count_parameters"]
 
+PAPER_NODES, PAPER_MID = 2809, 700  # SPEC 6: the paper's output and middle widths
 ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "silu": nn.SiLU, "elu": nn.ELU}
 
 
@@ -52,8 +53,10 @@ def count_parameters(module: nn.Module) -> int:
 class PaperNet(nn.Module):
     """Three per-coordinate nets; forward gives normalized displacements (b, 3, N)."""
 
-    def __init__(self, n_nodes: int, activation: str = "relu", n_mid: int = 700, n_hidden: int = 5) -> None:
+    def __init__(self, n_nodes: int, activation: str = "relu", n_mid: int | None = None, n_hidden: int = 5) -> None:
         super().__init__()
+        # SPEC 6: n_mid = 700 for the paper's 2809 nodes; other meshes keep that ratio
+        n_mid = n_mid if n_mid is not None else max(6, round(n_nodes * PAPER_MID / PAPER_NODES))
         self.config = {"arch": "paper", "n_nodes": n_nodes, "activation": activation, "n_mid": n_mid,
                        "n_hidden": n_hidden}
         self.widths = paper_widths(5, n_mid, n_nodes, n_hidden)

@@ -39,7 +39,7 @@ class TrainingConfig:
     max_rank: int = 48
     hidden: list[int] = field(default_factory=lambda: [64, 64, 64])
     # paper net
-    n_mid: int = 700
+    n_mid: int | None = None  # None: 700 / 2809 of the node count (SPEC 6)
 
     def __post_init__(self) -> None:
         if self.arch not in ("paper", "pod"):

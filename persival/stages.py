@@ -1,0 +1,204 @@
+"""The stages of `persival run` (persival.pipeline sequences them): each reads the artifacts of
+the stages before it from OUT and writes its own folder, through the stages' Python API.
+
+Each runner is ``fn(out, config, console) -> summary (json-able)``; ``SETTINGS[name]`` lists the
+RunConfig fields that change its result (part of its digest, so a changed setting reruns it).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+__all__ = ["RUNNERS", "SETTINGS", "print_results"]
+
+
+def _json(path: Path, data) -> None:
+    path.write_text(json.dumps(data, indent=2, default=float))
+
+
+def model(out: Path, config, console) -> dict:
+    import meshio
+
+    from persival.campaign.arm_simulator import muscle_surface
+    from persival.model.arm import ArmModel
+    from persival.model.output import bone_surfaces, muscle_submesh
+
+    folder = out / "model"
+    with console.status(f"meshing the built-in arm ({config.profile} profile)"):
+        arm = ArmModel(profile=config.profile)
+    geometry = {"model": arm.spec.name, "model_hash": arm.model_hash, "profile": config.profile, "muscles": {}}
+    for muscle in arm.spec.ordered_muscles():
+        nodes, cells = muscle_submesh(arm, muscle.name)
+        surface, _ = muscle_surface(arm, muscle.name)
+        meshio.Mesh(arm.mesh.points[nodes], [("tetra10", cells)]).write(folder / f"mesh_{muscle.name}.vtu")
+        geometry["muscles"][muscle.name] = {
+            "tet10": int(len(cells)), "nodes": int(len(nodes)), "surface_nodes": int(len(surface)),
+            "mesh_angle_deg": muscle.mesh_angle_deg, "fibre_prestretch": muscle.fibre_prestretch,
+            "line_moment_arm_mm": {str(t): round(arm.line_moment_arm(muscle, t), 2) for t in (0, 45, 90, 120, 150)},
+        }
+        g = geometry["muscles"][muscle.name]
+        console.print(f"  {muscle.name:16s} {g['tet10']:5d} tet10, {g['surface_nodes']:5d} surface nodes, "
+                      f"line moment arm at 90 deg {g['line_moment_arm_mm']['90']:+.1f} mm")
+    for name, (points, triangles) in bone_surfaces(arm, 90.0).items():
+        meshio.Mesh(points, [("triangle", triangles)]).write(folder / f"bone_{name}_90deg.vtu")
+    _json(folder / "geometry.json", geometry)
+    return geometry
+
+
+ARM_STATES = {"hanging": (0.0, 0.0, 0.0, 0.0, 0.0), "biceps_half": (0.5, 0.0, 0.0, 0.0, 0.0),
+              "flexors_full": (1.0, 1.0, 1.0, 0.0, 0.0)}
+
+
+def fe(out: Path, config, console) -> dict:
+    """Three FE states, each continued from the hanging arm (from biceps 0.5 the jump to all
+    flexors at 1 is a snap-through of the slack brachioradialis: docs/arm_model.md)."""
+    from persival.evaluate.render import render_states
+    from persival.model.arm import ArmModel
+    from persival.model.output import write_state
+
+    arm = ArmModel(profile=config.profile)
+    rows, directories = {}, []
+    with console.status("FE: the hanging arm (rest state, all activations 0)"):
+        hanging = arm.base_state()
+    for name, activations in ARM_STATES.items():
+        with console.status(f"FE: {name} {list(activations)} (joint equilibrium, Newton)"):
+            state = hanging if not any(activations) else arm.solve(activations, warm_start=hanging)
+        directories.append(write_state(arm, state, out / "fe" / name))
+        rows[name] = {"activations": list(activations), "elbow_angle_deg": state.elbow_angle_deg,
+                      "moment_residual_Nmm": state.moment_residual, "newton_iterations": state.statistics["iterations"],
+                      "wall_time_s": state.wall_time_s, "max_abs_J_minus_1": state.max_volume_change}
+        console.print(f"  {name:13s} elbow {state.elbow_angle_deg:6.2f} deg, moment residual {state.moment_residual:.1e} N mm, "
+                      f"{state.statistics['iterations']} Newton iterations, {state.wall_time_s:.1f} s, "
+                      f"max|J-1| {state.max_volume_change:.1e}")
+    render_states(directories, out / "fe" / "arm.png")
+    result = {"simulator": f"FE arm ({config.profile} profile)", "states": rows}
+    _json(out / "fe" / "arm.json", result)
+    return result
+
+
+def campaign(out: Path, config, console) -> dict:
+    """The SG design campaign and the random held-out states, or links to finished stores."""
+    from persival.campaign.design import Design
+    from persival.campaign.runner import INLINE, run_campaign
+    from persival.campaign.simulator import SimulatorSpec
+    from persival.campaign.store import CampaignStore
+
+    folder = out / "campaign"
+    options = {"profile": config.profile} if config.simulator == "arm" else {}
+    spec = SimulatorSpec(config.simulator, options)
+    stores = {}
+    for name, given, design in (("campaign", config.campaign_store, Design.sparse_grid(config.level)),
+                                ("held_out", config.held_out_store, Design.random(config.held_out, seed=config.seed + 1))):
+        path = folder / f"{name}.zarr"
+        if given is not None:  # reuse: a symbolic link keeps the layout without copying the states
+            path.symlink_to(Path(given).resolve(), target_is_directory=True)
+        else:
+            console.print(f"  {name}: {len(design)} states of the {config.simulator} simulator")
+            run_campaign(path, design, spec, scheduler=INLINE if config.simulator == "analytic" else None, progress=True)
+        with CampaignStore.open(path) as store:
+            stores[name] = {"path": str(path), **store.summary()}
+    for name, s in stores.items():
+        console.print(f"  {name}: {s['done']} done, {s['failed']} failed, simulator {s['simulator']}")
+    return stores
+
+
+def sg(out: Path, config, console) -> dict:
+    from persival.surrogate.stage import fit_sparse_grid
+
+    surrogate = fit_sparse_grid(out / "campaign" / "campaign.zarr", out / "sg", muscles=None)
+    console.print(f"  level {surrogate.metadata['level']}: {surrogate.grid.n_points} points, {surrogate.n_nodes} surface "
+                  f"nodes of {len(surrogate.surfaces.names)} muscles + elbow angle; data: {surrogate.metadata['label']}")
+    return {k: surrogate.metadata[k] for k in ("label", "level", "grid_points", "muscles")}
+
+
+def inverse(out: Path, config, console) -> dict:
+    from persival.surrogate.stage import build_activation_model, solve_inverse
+
+    t0 = time.perf_counter()
+    model = build_activation_model(out / "sg", out / "inverse" / "activation_model.json")
+    build_s = time.perf_counter() - t0
+    lo, hi = model.range_deg
+    solution, problem = solve_inverse(out / "sg", [lo + 0.1 * (hi - lo), 0.5 * (lo + hi), hi - 0.1 * (hi - lo)])
+    for r in solution.rows():
+        console.print(f"  Theta {r['target_deg']:6.2f} deg -> alpha {[round(a, 3) for a in r['activations']]}, "
+                      f"achieved {r['achieved_deg']:.3f} deg")
+    console.print(f"  activation model: {len(model.knots)} knots over {lo:.2f}-{hi:.2f} deg "
+                  f"(reachable {problem.reachable_range()[0]:.2f}-{problem.reachable_range()[1]:.2f}), "
+                  f"{len(model.branch_notes)} branch notes, built in {build_s:.1f} s")
+    return {"range_deg": [lo, hi], "reachable_deg": list(problem.reachable_range()), "knots": len(model.knots),
+            "branch_notes": model.branch_notes, "examples": solution.rows()}
+
+
+def data(out: Path, config, console) -> dict:
+    from persival.surrogate.stage import make_training_data
+
+    make_training_data(out / "sg", out / "inverse" / "activation_model.json", out / "data", config.samples,
+                       config.angle_fraction, config.seed)
+    console.print(f"  {config.samples} SG states, {config.angle_fraction:.0%} at alpha_opt(Theta), the rest uniform in [0,1]^5")
+    return {"samples": config.samples, "angle_fraction": config.angle_fraction}
+
+
+def _train_progress(console, label: str):
+    state = {"last": 0.0}
+
+    def report(done, total, val_loss, mae):
+        if time.perf_counter() - state["last"] > 5.0 or done == total:  # a line at least every 5 s
+            state["last"] = time.perf_counter()
+            console.print(f"  {label}: epoch {done}/{total}, val. loss {val_loss:.4g}, "
+                          f"MAE x/y/z {mae[0]:.2f}/{mae[1]:.2f}/{mae[2]:.2f} mm")
+    return report
+
+
+def train(out: Path, config, console) -> dict:
+    from persival.surrogate.stage import train_network
+    from persival.surrogate.training import TrainingConfig
+
+    summary = {}
+    runs = (("pod", TrainingConfig(arch="pod", folds=config.pod_folds, epochs=config.pod_epochs, seed=config.seed), None),
+            ("paper", TrainingConfig(arch="paper", folds=config.paper_folds, epochs=config.paper_epochs, activation="relu",
+                                     seed=config.seed), ["biceps"]))
+    for name, cfg, muscles in runs:
+        surrogate = train_network(out / "data", out / "networks" / name, cfg, muscles,
+                                  _train_progress(console, f"{name} net"))
+        best = surrogate.metadata["training"]["best"]
+        summary[name] = {"parameters": surrogate.metadata["parameters"], "best": best,
+                         "wall_time_s": surrogate.metadata["training"]["wall_time_s"],
+                         "muscles": surrogate.metadata["muscles"], "rank": surrogate.metadata["training"].get("rank")}
+        console.print(f"  {name} net: {summary[name]['parameters']} parameters, best validation loss {best['val_loss']:.4g} "
+                      f"(fold {best['fold']}, epoch {best['epoch']}), {summary[name]['wall_time_s']:.0f} s")
+    return summary
+
+
+def export(out: Path, config, console) -> dict:
+    from persival.deploy.export import export_model
+    from persival.surrogate.activation_model import AngleActivationModel
+    from persival.surrogate.base import load_surrogate
+
+    network = load_surrogate(out / "networks" / "pod")
+    model = AngleActivationModel.load(out / "inverse" / "activation_model.json")
+    meta = export_model(network, out / "export", activation_model=model)
+    for tier, v in meta["models"]["deformation"]["variants"].items():
+        console.print(f"  {tier:8s} {v['file']:25s} {v['bytes'] / 1e6:5.3f} MB, |ONNX - torch| <= "
+                      f"{v['max_abs_diff_vs_torch']['positions']:.1e} mm")
+    return {"variants": meta["models"]["deformation"]["variants"], "n_nodes": meta["n_nodes"]}
+
+
+SETTINGS = {
+    "model": ["profile"], "fe": ["profile"],
+    "campaign": ["profile", "simulator", "level", "held_out", "campaign_store", "held_out_store", "seed"],
+    "sg": [], "inverse": [], "data": ["samples", "angle_fraction", "seed"],
+    "train": ["pod_folds", "pod_epochs", "paper_folds", "paper_epochs", "seed"], "export": [],
+    "evaluate": ["seed"], "report": [],
+}
+RUNNERS = {"model": model, "fe": fe, "campaign": campaign, "sg": sg, "inverse": inverse, "data": data, "train": train,
+           "export": export}
+
+
+def print_results(out: Path, console, total_s: float) -> None:
+    console.rule(f"results ({total_s / 60:.1f} min)")
+    console.print(f"  report:   {out}/report/index.html")
+    console.print(f"  export:   {out}/export/ (ONNX + metadata.json)")
+    console.print(f"  viewer:   persival serve --artifacts {out}/export   then open http://127.0.0.1:8000/")
+    console.print(f"  stages:   {out}/<stage>/stage.json (inputs digest, time, summary)")
