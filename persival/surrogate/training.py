@@ -88,7 +88,7 @@ def _epoch(net, optimizer, x, y, batch: int, generator) -> float:
         loss = torch.mean((net.physical(net(x[rows])) - y[rows]) ** 2)
         loss.backward()
         optimizer.step()
-        total += float(loss) * len(rows)
+        total += loss.item() * len(rows)
     return total / len(x)
 
 
@@ -121,6 +121,8 @@ def train(dataset, config: TrainingConfig, out: str | Path, progress=None):
                  "optimizer": None, "best": None, "history": [], "wall_time_s": 0.0}
     folds = _folds(len(x), config.folds, config.seed)
     generator = torch.Generator().manual_seed(config.seed)
+    if state.get("generator") is not None:  # the batch order continues where it stopped
+        generator.set_state(state["generator"])
     total_epochs = config.folds * config.epochs
     while state["fold"] < len(folds):
         train_rows, val_rows = (torch.as_tensor(r) for r in folds[state["fold"]])
@@ -143,7 +145,7 @@ def train(dataset, config: TrainingConfig, out: str | Path, progress=None):
                 state["best"] = {"val_loss": val_loss, "fold": state["fold"], "epoch": state["epoch"],
                                  "net": copy.deepcopy(net.state_dict())}
             state.update(net=net.state_dict(), optimizer=optimizer.state_dict(), schedule=schedule.state_dict(),
-                         wall_time_s=state["wall_time_s"] + time.perf_counter() - t0)
+                         generator=generator.get_state(), wall_time_s=state["wall_time_s"] + time.perf_counter() - t0)
             _save_atomic(state, checkpoint)
             if progress is not None:
                 progress(state["fold"] * config.epochs + state["epoch"], total_epochs, val_loss, mae)

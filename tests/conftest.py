@@ -1,0 +1,60 @@
+"""Shared fixtures: one small but real pipeline run (analytic campaign -> SG -> inverse -> data
+-> networks -> export), built once per test session and shared by the pytest-xdist workers.
+
+Real inputs, small sizes: a level-1 campaign of the analytic stand-in (243 states), the
+activation model on a coarse knot spacing, 600 training states, a POD net and a paper net
+trained for a few epochs. Tests assert properties that hold at this size (exactness of the
+inverse solution, ONNX == PyTorch, SG vs itself, ...), not accuracy figures of a full run.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+
+def _build_small_run(root: Path) -> Path:
+    from persival.campaign.design import Design
+    from persival.campaign.runner import INLINE, run_campaign
+    from persival.campaign.simulator import SimulatorSpec
+    from persival.deploy.export import export_model
+    from persival.surrogate.activation_model import AngleActivationModel
+    from persival.surrogate.inverse import InverseProblem
+    from persival.surrogate.stage import fit_sparse_grid, make_training_data, train_network
+    from persival.surrogate.training import TrainingConfig
+
+    spec = SimulatorSpec("analytic", {})
+    run_campaign(root / "campaign" / "campaign.zarr", Design.sparse_grid(1), spec, scheduler=INLINE, progress=False)
+    run_campaign(root / "campaign" / "held_out.zarr", Design.random(10, seed=1), spec, scheduler=INLINE, progress=False)
+    sg = fit_sparse_grid(root / "campaign" / "campaign.zarr", root / "sg")
+    model = AngleActivationModel.build(InverseProblem(sg, n_candidates=1024), spacing_deg=5.0, tolerance=1e-3)
+    (root / "inverse").mkdir()
+    model.save(root / "inverse" / "activation_model.json")
+    make_training_data(root / "sg", root / "inverse" / "activation_model.json", root / "data", 600, seed=0)
+    pod = train_network(root / "data", root / "networks" / "pod", TrainingConfig(arch="pod", folds=1, epochs=30))
+    train_network(root / "data", root / "networks" / "paper", TrainingConfig(arch="paper", folds=1, epochs=10,
+                                                                              activation="relu"), ["biceps"])
+    export_model(pod, root / "export", activation_model=model)
+    (root / "complete.json").write_text(json.dumps({"complete": True}))
+    return root
+
+
+@pytest.fixture(scope="session")
+def small_run(tmp_path_factory) -> Path:
+    """OUT of a small real run (layout of persival.pipeline), built once for all workers."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):  # no xdist
+        return _build_small_run(tmp_path_factory.mktemp("small_run"))
+    from filelock import FileLock
+
+    shared = tmp_path_factory.getbasetemp().parent / "small_run"
+    with FileLock(str(shared) + ".lock"):
+        if not (shared / "complete.json").exists():
+            import shutil
+
+            shutil.rmtree(shared, ignore_errors=True)
+            shared.mkdir()
+            _build_small_run(shared)
+    return shared

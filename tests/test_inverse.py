@@ -1,0 +1,76 @@
+"""SPEC 5 on the SG of a real (analytic) campaign: the inverse problem and the activation model."""
+
+import numpy as np
+import pytest
+
+from persival.surrogate.activation_model import AngleActivationModel
+from persival.surrogate.inverse import EFFORT_WEIGHT, InverseProblem
+from persival.surrogate.surface_surrogate import SurfaceSurrogate
+
+
+@pytest.fixture(scope="module")
+def problem(small_run):
+    return InverseProblem(SurfaceSurrogate.load(small_run / "sg"))
+
+
+def test_solutions_hit_the_target_and_beat_a_dense_random_search(problem):
+    lo, hi = problem.reachable_range()
+    targets = np.array([lo + 12.0, 0.5 * (lo + hi), hi - 8.0])
+    solution = problem.solve(targets)
+    assert solution.reachable.all()
+    assert np.abs(solution.achieved_deg - targets).max() < 0.1  # SPEC 5 via issue 12: within 0.1 deg
+    dense = np.random.default_rng(5).uniform(0.0, 1.0, (100_000, 5))
+    theta = problem.model.predict_angle(dense)
+    for t, best in zip(targets, solution.objective):
+        searched = np.abs(t - theta) + EFFORT_WEIGHT * dense.sum(axis=1)
+        assert best <= searched.min() + 1e-9, f"random search beat the solver at {t:.1f} deg"
+
+
+def test_unreachable_targets_are_flagged_with_the_nearest_solution(problem):
+    lo, hi = problem.reachable_range()
+    solution = problem.solve([hi + 15.0])
+    assert not solution.reachable[0]
+    assert abs(solution.achieved_deg[0] - hi) < 1.0  # the nearest reachable angle, not a clip of the input
+
+
+def test_bad_targets_are_refused(problem):
+    for bad in ([np.nan], [], [200.0], [[10.0, 20.0]]):
+        with pytest.raises(ValueError):
+            problem.solve(bad)
+    with pytest.raises(ValueError, match="elbow-angle"):
+        InverseProblem(object())
+
+
+def test_activation_model_reproduces_the_solver_and_its_onnx(problem, small_run, tmp_path):
+    import onnxruntime as ort
+
+    model = AngleActivationModel.load(small_run / "inverse" / "activation_model.json")
+    lo, hi = model.range_deg
+    held_out = np.random.default_rng(2).uniform(lo, hi, 12)
+    jumps = [n["angle_deg"] for n in model.branch_notes if "jump" in n]
+    held_out = [t for t in held_out if all(abs(t - j) > 0.5 for j in jumps)]
+    for t in held_out:
+        solved, _ = problem.solve_from(t, model.predict(t)[0])
+        assert np.abs(solved - model.predict(t)[0]).max() < 1e-3, t
+    onnx_file = small_run / "export" / "activation_angle.onnx"
+    got = ort.InferenceSession(str(onnx_file)).run(None, {"elbow_angle_deg": np.array(held_out, np.float32)[:, None]})[0]
+    assert np.abs(got - model.predict(held_out)).max() < 1e-6
+    with pytest.raises(ValueError, match="outside"):
+        model.predict([hi + 5.0])
+    loaded = AngleActivationModel.load(model.save(tmp_path / "m.json"))
+    np.testing.assert_array_equal(loaded.predict(held_out), model.predict(held_out))
+
+
+def test_training_data_mixes_both_kinds_and_is_reproducible(small_run, tmp_path):
+    from persival.surrogate.dataset import Dataset
+    from persival.surrogate.stage import make_training_data
+
+    data = Dataset.load(small_run / "data")
+    on_curve = ~np.isnan(data.target_deg)
+    assert len(data) == 600 and on_curve.sum() == 300
+    assert np.abs(data.elbow_angles[on_curve] - data.target_deg[on_curve]).max() < 0.5
+    assert data.source["simulator"] == "analytic" and "SG data" in data.source["label"]
+    again = make_training_data(small_run / "sg", small_run / "inverse" / "activation_model.json", tmp_path / "d", 600)
+    np.testing.assert_array_equal(Dataset.load(again).positions, data.positions)
+    with pytest.raises(ValueError, match="another configuration"):
+        make_training_data(small_run / "sg", small_run / "inverse" / "activation_model.json", tmp_path / "d", 500)
