@@ -44,8 +44,35 @@ def _register_serve(app: typer.Typer) -> None:
                     limit_concurrency=256, timeout_keep_alive=5, h11_max_incomplete_event_size=16384)
 
 
+def _register_export(app: typer.Typer) -> None:
+    @app.command("export")
+    def export(
+        network: Path = typer.Option(..., "--network", help="Trained network folder (persival train)."),
+        out: Path = typer.Option(..., "--out", help="Export folder (ONNX tiers + metadata.json); replaced if it exists."),
+        activation_model: Path = typer.Option(None, "--activation-model", help="activation_model.json (persival inverse --out)."),
+    ) -> None:
+        """Export a trained network to ONNX (float32, float16, int8) with metadata.json (SPEC 9)."""
+        from persival.cli_errors import check_output_dir, user_errors
+        from persival.deploy.export import export_model
+        from persival.surrogate.activation_model import AngleActivationModel
+        from persival.surrogate.base import load_surrogate
+
+        with user_errors():
+            check_output_dir(out)
+            surrogate = load_surrogate(network)
+            if surrogate.kind != "network":
+                raise ValueError(f"{network} holds a {surrogate.kind} surrogate; export takes a trained network")
+            model = AngleActivationModel.load(activation_model) if activation_model is not None else None
+            meta = export_model(surrogate, out, activation_model=model)
+        for tier, v in meta["models"]["deformation"]["variants"].items():
+            typer.echo(f"{tier:8s} {v['file']:26s} {v['bytes'] / 1e6:6.3f} MB  |ONNX - torch| <= "
+                       f"{v['max_abs_diff_vs_torch']['positions']:.1e} mm")
+        typer.echo(f"wrote {out}/metadata.json ({meta['n_nodes']} nodes); serve it: persival serve --artifacts {out}")
+
+
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
-    """Attach `serve` to the main app and `serve` to the benchmark group."""
+    """Attach `export` and `serve` to the main app and `serve` to the benchmark group."""
+    _register_export(app)
     _register_serve(app)
 
     @bench_app.command("serve")
