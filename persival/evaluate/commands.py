@@ -115,6 +115,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         (out / "accuracy.json").write_text(json.dumps(report, indent=1))
         console.print(f"wrote {out / 'accuracy.json'} and {plot_accuracy(report, out / 'accuracy.png')}")
 
+    _register_run_evaluation(app, bench_app)
+
     @bench_app.command("fe")
     def bench_fe(
         mesh_size: float = typer.Option(6.3, min=1.0, help="Element size of the 40 x 300 mm spindle (mm)."),
@@ -146,3 +148,80 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         with user_errors():
             result = run_benchmark(dim=dim, level=level, degree=degree, n_out=n_out, batch=batch, reps_single=reps)
         print_benchmark(result)
+
+
+def _register_run_evaluation(app: typer.Typer, bench_app: typer.Typer) -> None:
+    """`persival evaluate`, `persival report` and `persival bench nn` over a run folder (persival run --out)."""
+
+    @app.command()
+    def evaluate(
+        run: Path = typer.Option(Path("results"), "--run", help="Run folder written by `persival run --out`."),
+        bench: bool = typer.Option(True, "--bench/--no-bench", help="Also the speed table (persival bench nn)."),
+        peer: bool = typer.Option(True, "--peer/--no-peer", help="Time the Keras/TFLite peer if installed."),
+        max_draws: int = typer.Option(20000, "--max-draws", min=300, help="Cap of the 300-draw stopping rule."),
+        states: int = typer.Option(25, "--states", min=1, help="Held-out states of the error-propagation table."),
+    ) -> None:
+        """The paper's tables (SPEC 7) and figures on a run: RUN/evaluate/*.md, *.json, *.png."""
+        from rich.console import Console
+
+        from persival.campaign.store import StoreError
+        from persival.evaluate.run_layout import RunLayout
+        from persival.evaluate.stage import evaluate_run
+        from persival.evaluate.tables import to_rich
+
+        console = Console()
+        layout = RunLayout(run)
+        with user_errors(StoreError, out=layout.evaluate):
+            layout.check()
+            check_output_dir(layout.evaluate)
+            result = evaluate_run(run, progress=True, bench=bench, peer=peer, max_draws=max_draws, n_states=states,
+                                  console=console)
+        for table in result["tables"].values():
+            console.print(to_rich(table))
+        for name, why in result["skipped"].items():
+            console.print(f"[yellow]skipped {name}: {why}[/yellow]")
+        console.print(f"wrote {layout.evaluate}/ ({len(result['tables'])} tables, {len(result['figures'])} figures) "
+                      f"in {result['wall_time_s']:.0f} s; next: persival report --run {run}")
+
+    @app.command()
+    def report(
+        run: Path = typer.Option(Path("results"), "--run", help="Run folder with RUN/evaluate (persival evaluate)."),
+    ) -> None:
+        """One self-contained HTML page of a run (every table and figure, provenance): RUN/report/index.html."""
+        from rich.console import Console
+
+        from persival.evaluate.report import write_report
+
+        out = Path(run) / "report"
+        with user_errors(out=out):
+            if not Path(run).is_dir():
+                raise FileNotFoundError(f"--run {run}: no such run folder")
+            check_output_dir(out)
+            index = write_report(run)
+        Console().print(f"wrote {index} and {index.parent / 'results.json'}")
+
+    @bench_app.command("nn")
+    def bench_nn(
+        run: Path = typer.Option(Path("results"), "--run", help="Run folder written by `persival run --out`."),
+        reps: int = typer.Option(1000, "--reps", min=10, help="Calls per row (after warm-up)."),
+        budget: float = typer.Option(4.0, "--budget", min=0.1, help="Seconds per row at most (then fewer calls)."),
+        peer: bool = typer.Option(True, "--peer/--no-peer", help="Time the Keras/TFLite peer if installed."),
+    ) -> None:
+        """Speed of every network variant, the deployed ONNX tiers and the SG (SPEC 8): RUN/evaluate/bench_nn.*"""
+        from rich.console import Console
+
+        from persival.campaign.store import StoreError
+        from persival.evaluate.run_layout import RunLayout
+        from persival.evaluate.stage import run_bench
+        from persival.evaluate.tables import to_rich
+
+        console = Console()
+        layout = RunLayout(run)
+        with user_errors(StoreError, out=layout.evaluate):
+            layout.check()
+            check_output_dir(layout.evaluate)
+            table = run_bench(run, progress=True, reps=reps, budget_s=budget, peer=peer, console=console)
+        console.print(to_rich(table))
+        for note in table["notes"]:
+            console.print(f"  {note}")
+        console.print(f"wrote {layout.evaluate / 'bench_nn.md'} and {layout.evaluate / 'bench_nn.json'}")
