@@ -185,6 +185,23 @@ def export(out: Path, config, console) -> dict:
     return {"variants": meta["models"]["deformation"]["variants"], "n_nodes": meta["n_nodes"]}
 
 
+def evaluate(out: Path, config, console) -> dict:
+    from persival.evaluate.stage import evaluate_run
+
+    result = evaluate_run(out, progress=True, console=console, n_states=config.held_out)
+    for name, why in result.get("skipped", {}).items():
+        console.print(f"  [yellow]skipped[/yellow] {name}: {why}")
+    return {"tables": sorted(result["tables"]), "figures": sorted(result["figures"]), "skipped": result.get("skipped", {})}
+
+
+def report(out: Path, config, console) -> dict:
+    from persival.evaluate.report import write_report
+
+    path = write_report(out)
+    console.print(f"  {path}")
+    return {"html": str(path)}
+
+
 SETTINGS = {
     "model": ["profile"], "fe": ["profile"],
     "campaign": ["profile", "simulator", "level", "held_out", "campaign_store", "held_out_store", "seed"],
@@ -193,7 +210,7 @@ SETTINGS = {
     "evaluate": ["seed"], "report": [],
 }
 RUNNERS = {"model": model, "fe": fe, "campaign": campaign, "sg": sg, "inverse": inverse, "data": data, "train": train,
-           "export": export}
+           "export": export, "evaluate": evaluate, "report": report}
 
 
 def print_results(out: Path, console, total_s: float) -> None:
