@@ -98,6 +98,16 @@ CASES = [
     ("serve", ["--artifacts", "nosuch"], "missing export folder", "no such artifact folder"),
     ("serve", ["--artifacts", "folder", "--port", "70000"], "out of range", BOX),
     ("bench serve", ["--artifacts", "nosuch", "--duration", "1"], "missing export folder", "no such artifact folder"),
+    ("moments", ["--profile", "nosuch", "--out", "new.npz"], "unknown profile", "unknown profile 'nosuch'"),
+    ("moments", ["--out", "new.npz", "--levels", "0,x"], "malformed levels", "--levels must be"),
+    ("moments", ["--out", "new.npz", "--levels", "0.2,1"], "levels not from 0 to 1", "must run from 0 to 1"),
+    ("moments", ["--out", "afile"], "foreign file in the way of the table", "not a moment table"),
+    ("moments", ["--out", "folder"], "folder where a file is expected", "is a folder, not a file"),
+    ("motion", ["--table", "nosuch.npz", "--out", "new"], "missing table", "no such moment table"),
+    ("motion", ["--table", "afile", "--out", "new"], "foreign table", "not a moment table"),
+    ("motion", ["--table", "afile", "--out", "new", "--loads", "1,-2"], "negative load", "must be finite and >= 0"),
+    ("motion", ["--table", "afile", "--out", "new", "--loads", "nan"], "non-finite load", "must be finite and >= 0"),
+    ("motion", ["--table", "afile", "--out", "new", "--angles", "inf"], "non-finite angle", "--angles must be finite"),
 ]
 
 

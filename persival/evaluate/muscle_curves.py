@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+from persival.campaign.moment_table import sweep_muscle
 from persival.figures import save_figure
 from persival.model.arm import ArmModel
-from persival.model.solver import ConvergenceError
 from persival.vocabulary import MUSCLES
 
 
@@ -29,37 +29,19 @@ def muscle_curves(arm: ArmModel, angles=None, progress=None) -> dict:
     angles = np.arange(lower, upper + 1e-9, 10.0) if angles is None else np.asarray(angles, dtype=float)
     out = {"angles_deg": angles}
     for muscle in arm.spec.ordered_muscles():
-        unit = arm.units[muscle.name]
-        geometry = np.array([arm.muscle_length(muscle, t) for t in angles])
-        lengths, dL = geometry[:, 0], geometry[:, 1]
-        tension = {0.0: np.full(len(angles), np.nan), 1.0: np.full(len(angles), np.nan)}
-        start = int(np.argmin(np.abs(angles - muscle.mesh_angle_deg)))
+        sweeps = {}
         for activation in (0.0, 1.0):
-            # the active sweep starts where the muscle is stretched: activating a slack
-            # (bowed) muscle in place is a snap-through, not a continuation
-            first = start if activation == 0.0 else int(np.argmax(lengths))
-            try:
-                origin = unit.solve(lengths[first], 0.0, unit.rest_state())
-                origin = unit.solve(lengths[first], activation, origin)
-            except ConvergenceError:
-                continue
-            for sweep in (range(first, len(angles)), range(first, -1, -1)):
-                state = origin
-                for k in sweep:
-                    try:
-                        state = unit.solve(lengths[k], activation, state)
-                    except ConvergenceError:
-                        break
-                    tension[activation][k] = state.tension
+            sweeps[activation] = sweep_muscle(arm, muscle, angles, activation)  # continuation along theta
             if progress is not None:
                 progress(muscle.name, activation)
+        passive, active = sweeps[0.0], sweeps[1.0]
         out[muscle.name] = {
-            "length_mm": lengths,
-            "dL_dtheta_mm_per_rad": dL,
-            "passive_tension_N": tension[0.0],
-            "active_tension_N": tension[1.0],
-            "passive_moment_Nmm": -tension[0.0] * dL,
-            "active_moment_Nmm": -tension[1.0] * dL,
+            "length_mm": passive["length_mm"],
+            "dL_dtheta_mm_per_rad": passive["dL_dtheta_mm_per_rad"],
+            "passive_tension_N": passive["tension_N"],
+            "active_tension_N": active["tension_N"],
+            "passive_moment_Nmm": passive["moment_Nmm"],
+            "active_moment_Nmm": active["moment_Nmm"],
         }
     out["external_moment_Nmm"] = np.array([arm.external_moment(np.radians(t))[0] for t in angles])
     return out

@@ -57,6 +57,10 @@ class Forearm(_Strict):
     mass: float = Field(1.6, gt=0, description="kg, forearm plus hand")
     centre_of_mass: float = Field(150.0, gt=0, description="mm from the elbow along the forearm")
     gravity: float = Field(9.81, ge=0, description="m/s^2, along -z")
+    # Not in the default TOML on purpose: the FE states do not depend on it, and adding it there
+    # would change the model hash that keys every campaign store. 330 mm: forearm (elbow to
+    # wrist, about 255 mm here) plus about 40 % of a 190 mm hand, the centre of a grip.
+    hand_distance: float = Field(330.0, gt=0, description="mm from the elbow to a load held in the hand (SPEC 5 motion model)")
 
 
 class Bone(_Strict):

@@ -90,6 +90,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         )
 
     _register_inverse_and_networks(app)
+    _register_motion(app)
 
 
 def _angles(text: str) -> list[float]:
@@ -206,3 +207,69 @@ def _register_inverse_and_networks(app: typer.Typer) -> None:
         best = surrogate.metadata["training"]["best"]
         typer.echo(f"best validation loss {best['val_loss']:.4g} (fold {best['fold']}, epoch {best['epoch']}), "
                    f"{surrogate.metadata['parameters']} parameters; wrote {out} (history.png)")
+
+
+def _loads(text: str) -> list[float]:
+    import math
+
+    try:
+        values = [float(t) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise ValueError(f"--loads must be comma-separated numbers in kg, got {text!r}") from None
+    bad = [v for v in values if not math.isfinite(v) or v < 0]
+    if bad or not values:
+        raise ValueError(f"--loads must be finite and >= 0 kg, got {text!r}")
+    return values
+
+
+def _register_motion(app: typer.Typer) -> None:
+    @app.command("motion")
+    def motion(
+        table: Path = typer.Option(..., "--table", help="Moment table (persival moments --out)."),
+        out: Path = typer.Option(..., "--out", help="Output folder: motion_model.json/.npz, motion_model.png, "
+                                 "activation_motion.onnx."),
+        model: Path = typer.Option(None, "--model", help="Model file the table must belong to; default: the built-in arm."),
+        angles: str = typer.Option("30,60,90,120", "--angles", help="Elbow angles (deg) of the printed table."),
+        loads: str = typer.Option("0,1,2,5", "--loads", help="Hand loads (kg) of the printed table."),
+    ) -> None:
+        """The motion-and-load activation model (SPEC 5) from a moment table: build, plot, ONNX."""
+        import numpy as np
+        from rich.console import Console
+
+        from persival.campaign.moment_table import MomentTable
+        from persival.model.arm_file import load_model_file
+        from persival.surrogate.motion_model import MotionActivationModel, plot_motion_model
+
+        with user_errors(out=out):
+            targets, masses = _angles(angles), _loads(loads)
+            if not np.isfinite(targets).all():
+                raise ValueError(f"--angles must be finite, got {angles!r}")
+            check_output_dir(out)
+            moments = MomentTable.load(table, load_model_file(model)[1], complete=True)
+            model_ = MotionActivationModel.build(moments)
+            rows = np.array([[t, 0.0, 0.0, m] for t in targets for m in masses])
+            activations, feasible = model_.predict(rows)  # angles outside the range: a user error
+            out.mkdir(parents=True, exist_ok=True)
+            model_.save(out)
+            entry = model_.export_onnx(out)
+            plot = plot_motion_model(model_, out / "motion_model.png")
+        _print_motion(Console(), model_, rows, activations, feasible, entry, plot)
+
+
+def _print_motion(console, model, rows, activations, feasible, entry, plot) -> None:
+    import numpy as np
+    from rich.table import Table
+
+    from persival.vocabulary import ABBREVIATIONS
+
+    t = Table(title=f"least-effort activations, zero velocity and acceleration (range {model.range_deg[0]:.0f}-"
+              f"{model.range_deg[1]:.0f} deg)")
+    for col in ["angle", "load kg", "M_req N mm", *ABBREVIATIONS, "holds"]:
+        t.add_column(col, justify="right")
+    for r, a, ok, req in zip(rows, activations, feasible, model.required_moment(rows)):
+        t.add_row(f"{r[0]:g}", f"{r[3]:g}", f"{req:.0f}", *[f"{v:.3f}" for v in a], "yes" if ok else "[red]no[/red]")
+    console.print(t)
+    angles = np.arange(np.ceil(model.range_deg[0] / 10) * 10, model.range_deg[1] + 1e-9, 10.0)
+    held = model.holdable_load_kg(angles)
+    console.print("holdable load (kg): " + ", ".join(f"{a:g} deg {h:.2f}" for a, h in zip(angles, held) if np.isfinite(h)))
+    console.print(f"ONNX vs Python {entry['max_abs_diff_vs_python']:.1e}; wrote {plot} and the model files")

@@ -1,0 +1,308 @@
+"""The motion-and-load activation model (SPEC 5, "Beyond the paper"; issue 12).
+
+``(Theta, dTheta/dt, d2Theta/dt2, load) -> alpha`` from the per-muscle FE moment tables
+(:mod:`persival.campaign.moment_table`). The hinge's equation of motion about the elbow
+(flexion positive, SPEC 3.3) is ``I(load) Theta'' = sum_m M_m(Theta, a_m) + M_g(Theta) +
+M_load(Theta) + M_p(Theta)``, so the muscles must supply the required moment
+
+    M_req = -(M_g + M_load + M_p) + I(load) Theta'',   M_load = -load g d sin(Theta),
+    I(load) = I_0 + load d^2,   I_0 = m (1.213 r_com)^2.
+
+d is the model file's ``forearm.hand_distance``; I_0 uses Winter's forearm-plus-hand radius of
+gyration about the elbow (0.827 of the segment length, centre of mass at 0.682: ratio 1.213)
+scaled to this model's centre of mass. The hinge has no damping, so the velocity enters nothing
+(it is an input for the contract, checked for finiteness). Effort: ``min sum_m a_m^2`` subject
+to ``sum_m M_m(Theta, a_m) = M_req``, a in [0, 1]^5 (docs/motion_model.md says why squares,
+not the sum). It depends only on (Theta, M_req), so it is solved once on a grid of Theta and of
+s = (M_req - M_min(Theta)) / (M_max(Theta) - M_min(Theta)) and interpolated bilinearly; a
+moment outside [M_min, M_max] is infeasible: ``predict`` returns feasible=False with the
+best-effort (saturated) activations, and the ONNX graph a non-zero ``moment_deficit_Nmm``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from persival.vocabulary import MUSCLES
+
+__all__ = ["MotionActivationModel", "least_effort", "plot_motion_model", "WINTER_GYRATION_RATIO"]
+
+WINTER_GYRATION_RATIO = 0.827 / 0.682  # radius of gyration about the elbow / centre-of-mass distance
+_ONNX_NAME = "activation_motion.onnx"
+
+
+def _response(V, levels, lam):
+    """Per-muscle argmin over [0, 1] of a^2 - lam M(a), M piecewise linear through the levels.
+
+    V: (n, 5, J) moments at the levels. Each segment's quadratic has its minimum at the clipped
+    stationary point lam s / 2; the muscle's minimum is the best segment (exact, also where M is
+    not concave). Returns activations (n, 5) and moments (n, 5).
+    """
+    a0, a1 = levels[:-1], levels[1:]
+    slope = np.diff(V, axis=2) / np.diff(levels)
+    cand = np.clip(lam[:, None, None] * slope / 2.0, a0, a1)
+    moment = V[:, :, :-1] + slope * (cand - a0)
+    k = np.argmin(cand**2 - lam[:, None, None] * moment, axis=2)[:, :, None]
+    return np.take_along_axis(cand, k, 2)[:, :, 0], np.take_along_axis(moment, k, 2)[:, :, 0]
+
+
+def _moments_at(V, levels, a):
+    """sum_m M_m(a_m) for activations a (n, 5), linear between the levels."""
+    j = np.clip(np.searchsorted(levels, a, side="right") - 1, 0, len(levels) - 2)
+    a0, a1 = levels[j], levels[j + 1]
+    v0, v1 = np.take_along_axis(V, j[:, :, None], 2)[..., 0], np.take_along_axis(V, j[:, :, None] + 1, 2)[..., 0]
+    return (v0 + (v1 - v0) * (a - a0) / (a1 - a0)).sum(axis=1)
+
+
+def least_effort(V, levels, required, iterations: int = 90):
+    """min sum a^2 s.t. sum_m M_m(a_m) = required, a in [0, 1]^5, vectorized (SPEC 5).
+
+    Dual bisection on the multiplier lam (the per-muscle response is monotone in lam), then a
+    bisection along the segment between the two last responses, which closes any duality gap
+    left where a muscle's moment is not concave in a. Returns activations (n, 5) and feasible
+    (n,): required within [sum_m min_a M_m, sum_m max_a M_m]; infeasible rows get the
+    best-effort (saturated) activations.
+    """
+    V, levels, R = np.asarray(V, float), np.asarray(levels, float), np.asarray(required, float)
+    passive = V[:, :, 0].sum(axis=1)
+    sign = np.where(R >= passive, 1.0, -1.0)
+    lo, hi = np.full(len(R), -25.0), np.full(len(R), 25.0)  # lam = sign exp(t)
+    for _ in range(iterations):
+        t = 0.5 * (lo + hi)
+        _, M = _response(V, levels, sign * np.exp(t))
+        short = sign * (M.sum(axis=1) - R) < 0
+        lo, hi = np.where(short, t, lo), np.where(short, hi, t)
+    a_lo = _response(V, levels, sign * np.exp(lo))[0]
+    a_hi = _response(V, levels, sign * np.exp(hi))[0]
+    a_lo = np.where((sign * (passive - R) >= 0)[:, None], 0.0, a_lo)  # exactly at the passive moment
+    w_lo, w_hi = np.zeros(len(R)), np.ones(len(R))
+    for _ in range(50):
+        w = 0.5 * (w_lo + w_hi)
+        short = sign * (_moments_at(V, levels, a_lo + w[:, None] * (a_hi - a_lo)) - R) < 0
+        w_lo, w_hi = np.where(short, w, w_lo), np.where(short, w_hi, w)
+    a = a_lo + w_hi[:, None] * (a_hi - a_lo)
+    feasible = (R >= V.min(axis=2).sum(axis=1) - 1e-9) & (R <= V.max(axis=2).sum(axis=1) + 1e-9)
+    return a, feasible
+
+
+class MotionActivationModel:
+    """``predict(motion (n, 4)) -> (activations (n, 5), feasible (n,))``; ONNX via ``export_onnx``."""
+
+    def __init__(self, theta_deg, s_grid, alpha, base, m_min, m_max, params: dict) -> None:
+        self.theta = np.asarray(theta_deg, float)  # (nT,) uniform
+        self.s = np.asarray(s_grid, float)  # (nS,) uniform in [0, 1]
+        self.alpha = np.asarray(alpha, float)  # (nT, nS, 5)
+        self.base = np.asarray(base, float)  # (nT,) -(M_g + M_p), N mm
+        self.m_min, self.m_max = np.asarray(m_min, float), np.asarray(m_max, float)  # (nT,) N mm
+        self.params = dict(params)  # hand_distance_mm, gravity_m_s2, inertia_kg_mm2, ...
+
+    @property
+    def range_deg(self) -> tuple[float, float]:
+        return float(self.theta[0]), float(self.theta[-1])
+
+    @classmethod
+    def build(cls, table, theta_step_deg: float = 1.0, n_moment: int = 201, inertia_kg_mm2: float | None = None,
+              hand_distance_mm: float | None = None) -> MotionActivationModel:
+        """Solve the least-effort problem on the (Theta, s) grid from a complete MomentTable."""
+        if not table.complete:
+            raise ValueError(f"the moment table is unfinished ({int(table.done.sum())} of {table.done.size} columns)")
+        lo, hi = table.finite_range_deg()
+        theta = np.linspace(lo, hi, int(round((hi - lo) / theta_step_deg)) + 1)
+        V = np.stack([table.level_moments(m, theta) for m in MUSCLES], axis=1)  # (nT, 5, J)
+        m_min, m_max = V.min(axis=2).sum(axis=1), V.max(axis=2).sum(axis=1)
+        s = np.linspace(0.0, 1.0, n_moment)
+        R = m_min[:, None] + s[None, :] * (m_max - m_min)[:, None]
+        a, _ = least_effort(np.repeat(V, n_moment, axis=0), table.levels, R.ravel())
+        fa = table.meta["forearm"]
+        params = {
+            "hand_distance_mm": float(hand_distance_mm or fa["hand_distance_mm"]), "gravity_m_s2": fa["gravity_m_s2"],
+            "inertia_kg_mm2": float(inertia_kg_mm2 or fa["mass_kg"] * (WINTER_GYRATION_RATIO * fa["centre_of_mass_mm"]) ** 2),
+            "forearm_mass_kg": fa["mass_kg"], "effort": "sum of squared activations",
+            "model_hash": table.meta.get("model_hash"), "profile": table.meta.get("profile"),
+            "table_angles_deg": table.angles_deg.tolist(), "table_levels": table.levels.tolist()}
+        base = -(table.gravity_moment(theta) + table.passive_joint_moment(theta))
+        return cls(theta, s, a.reshape(len(theta), n_moment, 5), base, m_min, m_max, params)
+
+    # ------------------------------------------------------------------ evaluation
+    def _check(self, motion) -> np.ndarray:
+        m = np.array(motion, dtype=np.float64)
+        m = m[None, :] if m.ndim == 1 else m
+        if m.ndim != 2 or m.shape[1] != 4:
+            raise ValueError(f"motion must have shape (n, 4): angle deg, velocity deg/s, acceleration deg/s^2, load kg; "
+                             f"got {m.shape}")
+        if not np.isfinite(m).all():
+            raise ValueError(f"motion: {int((~np.isfinite(m).all(axis=1)).sum())} row(s) are not finite")
+        if (m[:, 3] < 0).any():
+            raise ValueError(f"motion: the load must be >= 0 kg, got {float(m[m[:, 3] < 0, 3][0])!r}")
+        lo, hi = self.range_deg
+        outside = (m[:, 0] < lo - 1e-9) | (m[:, 0] > hi + 1e-9)
+        if outside.any():
+            raise ValueError(f"motion: elbow angle {float(m[outside, 0][0]):.3f} deg is outside the model's range "
+                             f"{lo:.2f} to {hi:.2f} deg")
+        return m
+
+    def required_moment(self, motion) -> np.ndarray:
+        """M_req (N mm) of the muscles for (angle, velocity, acceleration, load) rows (SPEC 5)."""
+        return self._required(self._check(motion), np, self.base)
+
+    def _required(self, m, xp, base):
+        """The SPEC 5 moment balance, written once for numpy and torch (``xp``)."""
+        p = self.params
+        theta, acc, load = m[:, 0], m[:, 2], m[:, 3]
+        base = self._interp_theta(theta, base, xp)
+        d = p["hand_distance_mm"]
+        load_gravity = load * p["gravity_m_s2"] * d * xp.sin(theta * (np.pi / 180.0))  # -M_load
+        inertia = 1e-3 * (p["inertia_kg_mm2"] + load * d**2) * acc * (np.pi / 180.0)  # kg mm^2 rad/s^2 -> N mm
+        return base + load_gravity + inertia
+
+    def _interp_theta(self, theta, values, xp):
+        i, w = self._cell(theta, self.theta, xp)
+        return values[i] * (1 - w) + values[i + 1] * w
+
+    @staticmethod
+    def _cell(x, grid, xp):
+        """Cell index and weight on a uniform grid (clamped), the same arithmetic in numpy and torch."""
+        n = len(grid)
+        u = (x - float(grid[0])) * ((n - 1) / float(grid[-1] - grid[0]))
+        u = xp.clip(u, 0.0, n - 1.0) if xp is np else u.clamp(0.0, n - 1.0)
+        i = xp.floor(u).astype(np.int64) if xp is np else xp.floor(u).long()
+        i = xp.clip(i, 0, n - 2) if xp is np else i.clamp(0, n - 2)
+        return i, u - i
+
+    def _evaluate(self, m, xp, tables):
+        """Activations and the signed moment deficit (N mm; 0 where feasible) for checked rows."""
+        alpha, m_min, m_max, base = tables
+        R = self._required(m, xp, base)
+        lo, hi = self._interp_theta(m[:, 0], m_min, xp), self._interp_theta(m[:, 0], m_max, xp)
+        i, wt = self._cell(m[:, 0], self.theta, xp)
+        j, ws = self._cell((R - lo) / (hi - lo), self.s, xp)
+        nS = len(self.s)
+        flat = alpha.reshape(-1, 5)
+        wt, ws = wt[:, None], ws[:, None]
+        a = ((flat[i * nS + j] * (1 - ws) + flat[i * nS + j + 1] * ws) * (1 - wt)
+             + (flat[(i + 1) * nS + j] * (1 - ws) + flat[(i + 1) * nS + j + 1] * ws) * wt)
+        relu = (lambda x: np.maximum(x, 0.0)) if xp is np else xp.relu
+        return a, relu(R - hi) - relu(lo - R)
+
+    def predict(self, motion, with_deficit: bool = False):
+        """Activations (n, 5) and feasible (n,) bool; infeasible rows are flagged, not clipped
+        silently (their activations are the saturated best effort). Raises ValueError on bad
+        input: not (n, 4), not finite, a negative load or an angle outside the range."""
+        a, deficit = self._evaluate(self._check(motion), np, (self.alpha, self.m_min, self.m_max, self.base))
+        return (a, deficit == 0.0, deficit) if with_deficit else (a, deficit == 0.0)
+
+    def holdable_load_kg(self, theta_deg) -> np.ndarray:
+        """Largest load held statically at each angle (inf where sin(theta) <= 0)."""
+        theta = np.atleast_1d(np.asarray(theta_deg, float))
+        spare = np.interp(theta, self.theta, self.m_max) - np.interp(theta, self.theta, self.base)
+        lever = self.params["gravity_m_s2"] * self.params["hand_distance_mm"] * np.sin(np.radians(theta))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(lever > 1e-9, np.maximum(spare, 0.0) / lever, np.inf)
+
+    # ------------------------------------------------------------------ export and files
+    def torch_module(self):
+        import torch
+
+        model = self
+
+        class MotionGraph(torch.nn.Module):
+            def __init__(self):
+                super().__init__()
+                for name in ("alpha", "m_min", "m_max", "base"):
+                    self.register_buffer(name, torch.tensor(getattr(model, name), dtype=torch.float64))
+
+            def forward(self, motion):  # float64 inside: the float32 contract costs only the output's rounding
+                a, deficit = model._evaluate(motion.double(), torch, (self.alpha, self.m_min, self.m_max, self.base))
+                return a.float(), deficit.unsqueeze(1).float()
+
+        return MotionGraph()
+
+    def probe(self, n: int = 512, seed: int = 0) -> np.ndarray:
+        """Random motion rows over the range (loads 0-5 kg, accelerations +-500 deg/s^2)."""
+        rng = np.random.default_rng(seed)
+        return np.column_stack([rng.uniform(*self.range_deg, n), rng.uniform(-200, 200, n),
+                                rng.uniform(-500, 500, n), rng.uniform(0.0, 5.0, n)])
+
+    def export_onnx(self, folder: str | Path) -> dict:
+        """folder/activation_motion.onnx (opset 17): motion [b, 4] -> activations [b, 5],
+        moment_deficit_Nmm [b, 1]; checked against Python (1e-6 on feasible rows)."""
+        import onnxruntime as ort
+        import torch
+
+        path = Path(folder) / _ONNX_NAME
+        example = torch.tensor([[60.0, 0.0, 0.0, 1.0], [90.0, 0.0, 0.0, 2.0]], dtype=torch.float32)
+        torch.onnx.export(self.torch_module().eval(), (example,), str(path), input_names=["motion"],
+                          output_names=["activations", "moment_deficit_Nmm"], opset_version=17, dynamo=False,
+                          dynamic_axes={"motion": {0: "batch"}, "activations": {0: "batch"}, "moment_deficit_Nmm": {0: "batch"}})
+        probe = self.probe().astype(np.float32)
+        got, _ = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).run(None, {"motion": probe})
+        ref, feasible = self.predict(probe.astype(np.float64))
+        diff = float(np.abs(got - ref)[feasible].max())
+        if diff > 1e-6:
+            raise RuntimeError(f"activation_motion.onnx differs from Python by {diff:.2e} (tolerance 1e-6)")
+        holdable = self.holdable_load_kg(np.arange(np.ceil(self.range_deg[0] / 10) * 10, self.range_deg[1] + 1e-9, 10.0))
+        finite = holdable[np.isfinite(holdable)]
+        return {"file": _ONNX_NAME, "input": "motion", "output": "activations", "outputs": ["activations", "moment_deficit_Nmm"],
+                "input_columns": ["angle_deg", "velocity_deg_s", "acceleration_deg_s2", "load_kg"],
+                "range_deg": list(self.range_deg), "max_load_kg": float(finite.max()) if len(finite) else 0.0,
+                "holdable_load_kg_per_10_deg": [None if not np.isfinite(h) else round(float(h), 3) for h in holdable],
+                "max_abs_diff_vs_python": diff, **{k: v for k, v in self.params.items() if not k.startswith("table_")}}
+
+    def save(self, folder: str | Path) -> Path:
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        np.savez(folder / "motion_model.npz", theta=self.theta, s=self.s, alpha=self.alpha, base=self.base,
+                 m_min=self.m_min, m_max=self.m_max)
+        (folder / "motion_model.json").write_text(json.dumps({"kind": "motion-activation-model", **self.params}, indent=1))
+        return folder
+
+    @classmethod
+    def load(cls, folder: str | Path) -> MotionActivationModel:
+        folder = Path(folder)
+        params = json.loads((folder / "motion_model.json").read_text())
+        if params.pop("kind", None) != "motion-activation-model":
+            raise ValueError(f"{folder} does not hold a motion activation model")
+        with np.load(folder / "motion_model.npz") as d:
+            return cls(d["theta"], d["s"], d["alpha"], d["base"], d["m_min"], d["m_max"], params)
+
+
+def plot_motion_model(model: MotionActivationModel, path: str | Path, loads=(0.0, 1.0, 2.0, 5.0)) -> Path:
+    """Activations against Theta for a few loads (zero velocity and acceleration); dotted where
+    the load cannot be held (the saturated best effort); last panel: required vs reachable moment."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from persival.figures import save_figure
+
+    theta = np.linspace(*model.range_deg, 321)
+    fig, axes = plt.subplots(2, 3, figsize=(13, 7), sharex=True)
+    for k, load in enumerate(loads):
+        motion = np.column_stack([theta, 0 * theta, 0 * theta, np.full_like(theta, load)])
+        a, ok = model.predict(motion)
+        colour = f"C{k}"
+        for m, ax in enumerate(axes.flat[:5]):
+            ax.plot(theta, np.where(ok, a[:, m], np.nan), color=colour, label=f"{load:g} kg")
+            ax.plot(theta, np.where(ok, np.nan, a[:, m]), color=colour, ls=":")
+        axes.flat[5].plot(theta, model.required_moment(motion) / 1e3, color=colour, label=f"required, {load:g} kg")
+    for m, ax in enumerate(axes.flat[:5]):
+        ax.set_title(MUSCLES[m])
+        ax.set_ylim(-0.03, 1.03)
+        ax.grid(alpha=0.3)
+    ax = axes.flat[5]
+    ax.plot(model.theta, model.m_max / 1e3, "k-", label="max muscle moment")
+    ax.plot(model.theta, model.m_min / 1e3, "k--", label="min muscle moment")
+    ax.set_title("moment about the elbow (N m)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    axes.flat[0].legend(fontsize=8)
+    for ax in axes[1]:
+        ax.set_xlabel("elbow angle (deg), zero velocity and acceleration")
+    fig.suptitle(f"least-effort activations (sum of a^2), loads at {model.params['hand_distance_mm']:.0f} mm; "
+                 "dotted: the load cannot be held")
+    fig.tight_layout()
+    return save_figure(fig, path, dpi=110)
