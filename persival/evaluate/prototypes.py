@@ -99,12 +99,13 @@ def _train_paper_net(n_nodes, n_mid, alpha, u, activation, epochs, batch, lr, se
     return net, mae_x, done
 
 
-def prototype_table(data, n_mid: int = 700, activation: str = "silu", samples: int = 64, epochs: int = 10,
+def prototype_table(data, n_mid: int | None = None, activation: str = "silu", samples: int = 64, epochs: int = 10,
                     batch: int = 16, learning_rate: float = 1e-3, seed: int = 0, max_seconds: float = 60.0,
                     progress=None) -> tuple[dict, PaperNet]:
     """``data``: the SG training data of the biceps (a Dataset). Returns the table and the short-trained paper net."""
     n = data.surfaces.n_nodes
-    n_mid = n_mid if 5 < n_mid < n else max(6, n // 4)
+    if n_mid is None or not 5 < n_mid < n:  # SPEC 6: 700 of 2809, the same ratio for other meshes
+        n_mid = max(6, round(n * 700 / 2809))
     rows_used = np.random.default_rng(seed).permutation(len(data))[:samples]
     alpha = data.activations[rows_used]
     u = data.displacements[rows_used].astype(np.float32)

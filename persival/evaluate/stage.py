@@ -136,9 +136,9 @@ def _prototypes_and_hotspots(run, steps, command, tables, skipped, figures, prot
     if layout.data.exists() and "biceps" in run.sg.surfaces.names:
         t0 = time.perf_counter()
         paper = run.networks.get("paper")
-        config = paper.config if paper is not None else None
+        n_mid = paper.net.config.get("n_mid") if paper is not None else None
         data = Dataset.load(layout.data).select("biceps")
-        table, short = prototype_table(data, config.n_mid if config else 700, config.activation if config else "silu",
+        table, short = prototype_table(data, n_mid, paper.config.activation if paper is not None else "silu",
                                        samples=prototype_samples, progress=steps.task("prototypes", len(SHAPES)))
         tables["prototypes"] = _save(table, layout.evaluate, command, {"data": str(layout.data)}, t0)
     else:

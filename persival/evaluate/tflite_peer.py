@@ -129,7 +129,7 @@ def main(argv=None) -> int:
 
 
 def run_in_subprocess(n_nodes: int = 2809, n_mid: int = 700, activation: str = "silu", reps: int = 1000,
-                      budget_s: float = 8.0, timeout_s: float = 900.0) -> dict:
+                      budget_s: float = 8.0, timeout_s: float = 900.0, batches=(1, 64)) -> dict:
     """Run the peer in a child process; returns its JSON result or raises RuntimeError with its stderr tail."""
     import subprocess
 
@@ -137,7 +137,8 @@ def run_in_subprocess(n_nodes: int = 2809, n_mid: int = 700, activation: str = "
     root = str(Path(__file__).resolve().parents[2])
     env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     cmd = [sys.executable, "-m", "persival.evaluate.tflite_peer", "--nodes", str(n_nodes), "--mid", str(n_mid),
-           "--activation", activation, "--reps", str(reps), "--budget", str(budget_s)]
+           "--activation", activation, "--reps", str(reps), "--budget", str(budget_s),
+           "--batches", ",".join(str(int(b)) for b in batches)]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, env=env)
     lines = [line for line in proc.stdout.splitlines() if line.startswith("{")]
     if proc.returncode != 0 or not lines:
