@@ -69,8 +69,9 @@ def _digest(obj) -> str:
 
 def _stage_inputs(name: str, config: RunConfig, done: dict) -> dict:
     keys = stages.SETTINGS[name]
-    return {"settings": {k: getattr(config, k) for k in keys}, "upstream": {u: done[u]["digest"] for u in
-                                                                           dict((s[0], s[2]) for s in STAGES)[name]}}
+    upstream = dict((s[0], s[2]) for s in STAGES)[name]
+    # a stage left out of this run (fe with --no-fe-states) is no input
+    return {"settings": {k: getattr(config, k) for k in keys}, "upstream": {u: done[u]["digest"] for u in upstream if u in done}}
 
 
 def run(out: str | Path, config: RunConfig | None = None, console=None) -> dict:
@@ -107,5 +108,5 @@ def run(out: str | Path, config: RunConfig | None = None, console=None) -> dict:
     total = time.perf_counter() - started
     (out / "run.json").write_text(json.dumps({"config": asdict(config), "wall_time_s": total,
                                               "stages": {n: d["wall_time_s"] for n, d in done.items()}}, indent=2))
-    stages.print_results(out, console, total)
+    stages.print_results(out, console, total, sum(d["wall_time_s"] for d in done.values()))
     return done

@@ -213,8 +213,8 @@ RUNNERS = {"model": model, "fe": fe, "campaign": campaign, "sg": sg, "inverse": 
            "export": export, "evaluate": evaluate, "report": report}
 
 
-def print_results(out: Path, console, total_s: float) -> None:
-    console.rule(f"results ({total_s / 60:.1f} min)")
+def print_results(out: Path, console, total_s: float, stages_s: float) -> None:
+    console.rule(f"results: this run {total_s / 60:.1f} min, all stages {stages_s / 60:.1f} min")
     console.print(f"  report:   {out}/report/index.html")
     console.print(f"  export:   {out}/export/ (ONNX + metadata.json)")
     console.print(f"  viewer:   persival serve --artifacts {out}/export   then open http://127.0.0.1:8000/")
