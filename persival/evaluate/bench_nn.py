@@ -228,6 +228,14 @@ def bench_table(run: LoadedRun, reps: int = 1000, budget_s: float = 4.0, peer: b
         if progress is not None:
             progress(k + 1, len(groups), what)
     check, notes = _targets(rows, peer_info)
+    if truth is not None and {"paper", "pod"} <= set(run.networks) and "biceps" in run.networks["pod"].surfaces.names:
+        pod, paper = (heldout_accuracy(run.networks[k].predict, truth, run.networks[k].surfaces, "biceps")
+                      for k in ("pod", "paper"))
+        ok = pod["heldout_mae_mm"] <= paper["heldout_mae_mm"]
+        check["accuracy_vs_paper_net"] = {"pod_biceps_mae_mm": pod["heldout_mae_mm"],
+                                          "paper_biceps_mae_mm": paper["heldout_mae_mm"], "met": ok}
+        notes.append(f"Accuracy on the biceps ({pod['accuracy_on']}): POD net MAE {pod['heldout_mae_mm']:.3f} mm, "
+                     f"trained paper net {paper['heldout_mae_mm']:.3f} mm: equal or better {'met' if ok else 'NOT met'}.")
     label = truth.source.get("label") if truth is not None else "no held-out states"
     notes = [f"Mean of up to {reps} calls after a warm-up (fewer where a row would exceed {budget_s:g} s: see 'calls'); "
              "PyTorch rows with 1 thread; the SG's numpy BLAS with 1 and 2; 'ms / state' = ms / call / batch.",

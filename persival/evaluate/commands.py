@@ -152,7 +152,12 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
 
 def _register_run_evaluation(app: typer.Typer, bench_app: typer.Typer) -> None:
     """`persival evaluate`, `persival report` and `persival bench nn` over a run folder (persival run --out)."""
+    _register_evaluate(app)
+    _register_report(app)
+    _register_bench_nn(bench_app)
 
+
+def _register_evaluate(app: typer.Typer) -> None:
     @app.command()
     def evaluate(
         run: Path = typer.Option(Path("results"), "--run", help="Run folder written by `persival run --out`."),
@@ -183,6 +188,8 @@ def _register_run_evaluation(app: typer.Typer, bench_app: typer.Typer) -> None:
         console.print(f"wrote {layout.evaluate}/ ({len(result['tables'])} tables, {len(result['figures'])} figures) "
                       f"in {result['wall_time_s']:.0f} s; next: persival report --run {run}")
 
+
+def _register_report(app: typer.Typer) -> None:
     @app.command()
     def report(
         run: Path = typer.Option(Path("results"), "--run", help="Run folder with RUN/evaluate (persival evaluate)."),
@@ -200,6 +207,8 @@ def _register_run_evaluation(app: typer.Typer, bench_app: typer.Typer) -> None:
             index = write_report(run)
         Console().print(f"wrote {index} and {index.parent / 'results.json'}")
 
+
+def _register_bench_nn(bench_app: typer.Typer) -> None:
     @bench_app.command("nn")
     def bench_nn(
         run: Path = typer.Option(Path("results"), "--run", help="Run folder written by `persival run --out`."),
