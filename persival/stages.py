@@ -57,14 +57,17 @@ def fe(out: Path, config, console) -> dict:
     from persival.evaluate.render import render_states
     from persival.model.arm import ArmModel
     from persival.model.output import write_state
+    from persival.model.progress import ConsoleProgress
 
     arm = ArmModel(profile=config.profile)
     rows, directories = {}, []
-    with console.status("FE: the hanging arm (rest state, all activations 0)"):
-        hanging = arm.base_state()
+    with console.status("FE: the hanging arm (rest state, all activations 0)") as status, \
+            ConsoleProgress(console, status, "FE: the hanging arm") as report:
+        hanging = arm.base_state(progress=report)
     for name, activations in ARM_STATES.items():
-        with console.status(f"FE: {name} {list(activations)} (joint equilibrium, Newton)"):
-            state = hanging if not any(activations) else arm.solve(activations, warm_start=hanging)
+        with console.status(f"FE: {name} {list(activations)} (joint equilibrium, Newton)") as status, \
+                ConsoleProgress(console, status, f"FE: {name}") as report:
+            state = hanging if not any(activations) else arm.solve(activations, warm_start=hanging, progress=report)
         directories.append(write_state(arm, state, out / "fe" / name))
         rows[name] = {"activations": list(activations), "elbow_angle_deg": state.elbow_angle_deg,
                       "moment_residual_Nmm": state.moment_residual, "newton_iterations": state.statistics["iterations"],

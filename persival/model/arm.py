@@ -22,6 +22,7 @@ from persival.model.constraints import Hinge
 from persival.model.geometry import swept_solid_mesh
 from persival.model.mesh import Tet10Mesh
 from persival.model.muscle_unit import MuscleState, MuscleUnit, line_rotation
+from persival.model.progress import SolveTracker
 from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
 from persival.vocabulary import MUSCLES, check_activation_vector
 
@@ -233,24 +234,28 @@ class ArmModel:
     def cell_activation(self, activations: np.ndarray) -> np.ndarray:
         return np.asarray(activations, dtype=float)[self.mesh.cell_data["muscle"]]
 
-    def base_state(self) -> ArmState:
-        """The hanging arm (all activations 0): every muscle continued from its mesh pose."""
+    def base_state(self, progress=None) -> ArmState:
+        """The hanging arm (all activations 0): every muscle continued from its mesh pose.
+        ``progress(SolveProgress)`` is called at every load step (persival.model.progress)."""
         if self._base is None:
             t0 = time.perf_counter()
-            rest = {name: unit.rest_state() for name, unit in self.units.items()}
-            state = self._equilibrium(np.zeros(5), rest, self.start_angle_deg)
+            tracker = SolveTracker(progress, "rest state")
+            rest = {name: unit.rest_state(tracker.muscle(name)) for name, unit in self.units.items()}
+            tracker.phase = "joint equilibrium"
+            state = self._equilibrium(np.zeros(5), rest, self.start_angle_deg, tracker)
             state.wall_time_s = time.perf_counter() - t0
             self._base = state
         return self._base
 
-    def solve(self, activations, warm_start: ArmState | None = None) -> ArmState:
-        """Equilibrium for the five activations, continued from ``warm_start`` (or the hanging arm)."""
+    def solve(self, activations, warm_start: ArmState | None = None, progress=None) -> ArmState:
+        """Equilibrium for the five activations, continued from ``warm_start`` (or the hanging arm);
+        ``progress`` as in :meth:`base_state`."""
         target = check_activation_vector(activations)
         t0 = time.perf_counter()
-        start = warm_start if warm_start is not None else self.base_state()
+        start = warm_start if warm_start is not None else self.base_state(progress)
         if warm_start is None and not np.any(target):
             return start  # the hanging arm itself (its statistics are those of its solve)
-        state = self._equilibrium(target, start.muscle_states, start.elbow_angle_deg)
+        state = self._equilibrium(target, start.muscle_states, start.elbow_angle_deg, SolveTracker(progress))
         state.wall_time_s = time.perf_counter() - t0
         return state
 
@@ -270,7 +275,8 @@ class ArmModel:
         dL = float(e @ v1)
         return L, dL, float((v1 @ v1 - dL**2) / L + e @ v2)
 
-    def moment_balance(self, theta_deg: float, activations, start: dict[str, MuscleState], statistics: dict | None = None):
+    def moment_balance(self, theta_deg: float, activations, start: dict[str, MuscleState], statistics: dict | None = None,
+                       tracker: SolveTracker | None = None):
         """The joint's moment residual g = dPi/dtheta (N mm) at a prescribed angle, the joint
         stiffness dg/dtheta (N mm/rad, the muscles re-equilibrated) and the muscle states.
 
@@ -280,7 +286,7 @@ class ArmModel:
         states, g, dg = {}, 0.0, 0.0
         for muscle, a in zip(self.spec.ordered_muscles(), activations):
             L, dL, d2L = self.muscle_length(muscle, theta_deg)
-            state = self.units[muscle.name].solve(L, float(a), start[muscle.name])
+            state = self.units[muscle.name].solve(L, float(a), start[muscle.name], tracker and tracker.muscle(muscle.name))
             states[muscle.name] = state
             g += state.tension * dL
             dg += state.stiffness * dL**2 + state.tension * d2L
@@ -290,7 +296,7 @@ class ArmModel:
         M, dM = self.external_moment(np.radians(theta_deg))
         return g - M, dg - dM, states
 
-    def _equilibrium(self, target, start: dict[str, MuscleState], angle: float) -> ArmState:
+    def _equilibrium(self, target, start: dict[str, MuscleState], angle: float, tracker: SolveTracker) -> ArmState:
         """Solve g(theta) = 0 by a safeguarded Newton iteration on theta (SPEC 3.3: an
         equivalent of the bordered system). Its derivative is the Schur complement of every
         muscle (exact, so the iteration converges quadratically); a bracket of the root and a
@@ -300,7 +306,8 @@ class ArmModel:
         opts = self.options
         stats: dict = {"joint_iterations": 0, "iterations": 0}
         theta = float(angle)
-        g, dg, states = self.moment_balance(theta, target, start, stats)
+        tracker.joint(0, theta)
+        g, dg, states = self.moment_balance(theta, target, start, stats, tracker)
         lo, hi = -np.inf, np.inf  # bracket: g(lo) < 0 < g(hi) (g grows with theta when stable)
         lower, upper = self.spec.joint.limits_deg
         for _ in range(60):
@@ -317,8 +324,9 @@ class ArmModel:
                 trial = 0.5 * (lo + hi) if np.isfinite(lo) and np.isfinite(hi) else theta + step
             trial = float(np.clip(trial, lower - 30.0, upper + 30.0))
             for _retry in range(4):
+                tracker.joint(stats["joint_iterations"] + 1, trial, g)
                 try:
-                    g_t, dg_t, states_t = self.moment_balance(trial, target, states, stats)
+                    g_t, dg_t, states_t = self.moment_balance(trial, target, states, stats, tracker)
                     break
                 except ConvergenceError as exc:
                     failure = exc

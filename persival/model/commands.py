@@ -40,6 +40,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         from persival.model.arm import ArmModel
         from persival.model.arm_file import load_model_file
         from persival.model.output import write_state
+        from persival.model.progress import ConsoleProgress
         from persival.model.solver import ConvergenceError
         from persival.vocabulary import check_activation_vector
 
@@ -52,11 +53,13 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         with user_errors(out=out):
             with console.status("meshing the arm (gmsh)"):
                 arm = ArmModel(model, profile)
-            with console.status("solving the hanging arm (activations 0)"):
-                arm.base_state()
-            with console.status(f"solving activations {alpha}"):
+            with console.status("solving the hanging arm (activations 0)") as status, \
+                    ConsoleProgress(console, status, "the hanging arm") as report:
+                arm.base_state(progress=report)
+            with console.status(f"solving activations {alpha}") as status, \
+                    ConsoleProgress(console, status, f"activations {alpha}") as report:
                 try:
-                    state = arm.solve(alpha)
+                    state = arm.solve(alpha, progress=report)
                 except ConvergenceError as exc:
                     typer.echo(f"error: the FE solve did not converge: {exc}; nothing was written", err=True)
                     raise typer.Exit(3) from None

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import bisect
 from dataclasses import dataclass, replace
+from itertools import pairwise
 
 import numpy as np
 
@@ -102,23 +103,25 @@ class MuscleUnit:
     def options(self, value: SolverOptions) -> None:
         self.solver.options = value
 
-    def rest_state(self) -> MuscleState:
+    def rest_state(self, progress=None) -> MuscleState:
         """The passive equilibrium at the mesh length (activation 0), solved once.
 
         With a fibre prestretch lambda_0 > 1 the mesh pose carries a small passive fibre
         stress (SPEC 3.3) and is not yet in equilibrium. Newton from the mesh pose can fail
         on it (the passive law's c4 = 42.6 makes the tangent far stiffer than the stress
         suggests), so the prestretch is switched on by continuation, 1 -> lambda_0.
+        ``progress(share)`` is called after every accepted load step (share of the prestretch).
         """
         if getattr(self, "_rest", None) is None:
             u = np.zeros((self.mesh.n_nodes, 3))
             full = self.material
             try:
-                for share in (0.6, 0.8, 0.9, 0.95, 0.98, 1.0):
+                for before, share in pairwise((0.0, 0.6, 0.8, 0.9, 0.95, 0.98, 1.0)):
                     self.solver.material = replace(full, fibre_prestretch=1.0 + share * (full.fibre_prestretch - 1.0))
                     self._insertion_face.start[:] = 0.0
                     self._insertion_face.end[:] = 0.0
-                    u = self.solver.solve(0.0, initial_displacement=u).displacement
+                    step = None if progress is None else (lambda t, a=before, b=share: progress(a + t * (b - a)))
+                    u = self.solver.solve(0.0, initial_displacement=u, progress=step).displacement
             except ConvergenceError as exc:
                 raise ConvergenceError(f"muscle {self.name!r}: the prestressed mesh pose has no equilibrium: {exc}") from exc
             finally:
@@ -128,22 +131,23 @@ class MuscleUnit:
             self._rest = MuscleState(self.mesh_length, 0.0, u, tension, stiffness, float(np.abs(np.linalg.det(F) - 1).max()))
         return self._rest
 
-    def solve(self, length: float, activation: float, start: MuscleState | None = None) -> MuscleState:
+    def solve(self, length: float, activation: float, start: MuscleState | None = None, progress=None) -> MuscleState:
         """Equilibrium at (length, activation), continued from ``start`` (default: the mesh pose).
 
         The insertion face moves from the start length to ``length`` while the activation
-        moves along: the solver's load stepping is the continuation.
+        moves along: the solver's load stepping is the continuation. ``progress(t)`` is called
+        after every accepted load step (persival.model.progress); it changes nothing solved.
         """
         if not np.isfinite(length) or length <= 0:
             raise ValueError(f"muscle {self.name!r}: length must be positive, got {length}")
-        start = start or self.rest_state()
-        state = self._from_library(float(length), float(activation))
+        start = start or self.rest_state(progress)
+        state = self._from_library(float(length), float(activation), progress)
         if state is None:
-            state = self._continue(float(length), float(activation), start)
+            state = self._continue(float(length), float(activation), start, progress=progress)
         self._remember(state)
         return state
 
-    def _from_library(self, length: float, activation: float) -> MuscleState | None:
+    def _from_library(self, length: float, activation: float, progress=None) -> MuscleState | None:
         """Newton from the interpolation of two solved states of the same activation that
         bracket ``length`` (within ``library_gap_mm``); None if there are none or it fails.
 
@@ -167,7 +171,8 @@ class MuscleUnit:
         options = self.solver.options
         self.solver.options = replace(options, initial_step=1.0, min_step=1.0, max_iterations=min(options.max_iterations, 12))
         try:
-            solution = self.solver.solve(activation, initial_displacement=guess, initial_activation=activation)
+            solution = self.solver.solve(activation, initial_displacement=guess, initial_activation=activation,
+                                         progress=progress)
         except ConvergenceError:
             return None
         finally:
@@ -183,7 +188,8 @@ class MuscleUnit:
             return
         states.insert(k, state)
 
-    def _continue(self, length: float, activation: float, start: MuscleState, detour: bool = True) -> MuscleState:
+    def _continue(self, length: float, activation: float, start: MuscleState, detour: bool = True,
+                  progress=None) -> MuscleState:
         self._insertion_face.start[:] = (start.length - self.mesh_length) * self.direction
         self._insertion_face.end[:] = (length - self.mesh_length) * self.direction
         options = self.solver.options
@@ -192,7 +198,8 @@ class MuscleUnit:
             self.solver.options = replace(options, initial_step=1.0)
         try:
             solution = self.solver.solve(
-                float(activation), initial_displacement=start.displacement, initial_activation=float(start.activation)
+                float(activation), initial_displacement=start.displacement, initial_activation=float(start.activation),
+                progress=progress,
             )
         except ConvergenceError as exc:
             failure = exc
@@ -208,8 +215,8 @@ class MuscleUnit:
             # pose itself stalls for the biceps and the brachioradialis): if it fails too, the
             # error reports the direct path.
             try:
-                taut = self._continue(self.mesh_length, activation, self.rest_state(), detour=False)
-                return self._continue(length, activation, taut, detour=False)
+                taut = self._continue(self.mesh_length, activation, self.rest_state(), detour=False, progress=progress)
+                return self._continue(length, activation, taut, detour=False, progress=progress)
             except ConvergenceError:
                 pass
         raise ConvergenceError(
