@@ -1,15 +1,34 @@
 """Pictures of solved arm states: muscles coloured by displacement magnitude, bones in grey.
 
 Reads the state directories written by ``persival simulate`` (state.json + VTU files), so it
-needs nothing from the model stage but its files. Off-screen pyvista (VTK); one panel per state.
+needs nothing from the model stage but its files. Each state is drawn off-screen by pyvista
+(VTK) in a parallel projection of the sagittal plane, framed to the arm; matplotlib lays the
+panels out with titles, muscle labels and one colour bar beside them (a VTK scalar bar sits on
+top of the geometry).
+
+The colour is the displacement from the hanging arm (all activations 0) when one of the
+states is the hanging arm of the same model: the VTU files' own ``displacement`` is measured
+from each muscle's stress-free mesh pose (60 or 90 deg), where a passive muscle that only rode
+along with the forearm seems to have moved by centimetres.
 """
 
 from __future__ import annotations
 
+import ctypes.util
 import json
+import os
+import textwrap
 from pathlib import Path
 
+import numpy as np
+
 from persival.vocabulary import MUSCLES
+
+__all__ = ["read_state_dir", "render_states", "headless_vtk"]
+
+BONE_COLOUR = "#d8d2c4"
+# labels left of the arm: the extensors lie behind the humerus, so in a view with flexion to the right
+POSTERIOR = ("triceps", "anconeus")
 
 
 def read_state_dir(directory: str | Path) -> dict:
@@ -24,44 +43,169 @@ def read_state_dir(directory: str | Path) -> dict:
     return json.loads(summary.read_text())
 
 
-def render_states(directories: list[str | Path], out: str | Path, window: tuple[int, int] = (560, 720)) -> Path:
-    """Render each state into its own panel, side by side, with one shared colour scale."""
-    import numpy as np
+def headless_vtk() -> None:
+    """Pick VTK's off-screen window directly when there is no display.
+
+    Without DISPLAY, VTK's default X window fails first and logs "bad X server connection"
+    before it falls back to EGL; asking for EGL (or OSMesa) up front gives the same picture
+    without the message. A user's own choice (VTK_DEFAULT_OPENGL_WINDOW) or a display is left alone.
+    """
+    if os.environ.get("DISPLAY") or os.environ.get("VTK_DEFAULT_OPENGL_WINDOW"):
+        return
+    for library, window in (("EGL", "vtkEGLRenderWindow"), ("OSMesa", "vtkOSOpenGLRenderWindow")):
+        if ctypes.util.find_library(library):
+            os.environ["VTK_DEFAULT_OPENGL_WINDOW"] = window
+            return
+
+
+def _load(directory: Path):
     import pyvista as pv
 
+    summary = read_state_dir(directory)
+    muscles = {name: pv.read(directory / f"{name}.vtu") for name in MUSCLES}
+    bones = [pv.read(p) for p in sorted(directory.glob("bone_*.vtu"))]
+    return summary, muscles, bones
+
+
+def _reference(states) -> int | None:
+    """Index of the hanging arm (all activations 0) among the states, if all share its mesh."""
+    for k, (summary, muscles, _) in enumerate(states):
+        if any(summary["activations"].values()):
+            continue
+        same = all(s.get("model_hash") == summary.get("model_hash")
+                   and all(m[n].n_points == muscles[n].n_points for n in MUSCLES) for s, m, _ in states)
+        return k if same else None
+    return None
+
+
+def _camera(bounds: np.ndarray, height_px: int):
+    """Window size and camera of the sagittal view seen from +x (screen right = +y, up = +z) that
+    shows exactly the (y, z) box ``bounds`` = [[ylo, zlo], [yhi, zhi]]."""
+    (ylo, zlo), (yhi, zhi) = bounds
+    width_px = int(round(height_px * (yhi - ylo) / (zhi - zlo)))
+    centre = (0.0, 0.5 * (ylo + yhi), 0.5 * (zlo + zhi))
+    position = [(centre[0] + 2000.0, centre[1], centre[2]), centre, (0.0, 0.0, 1.0)]
+    return (width_px, height_px), position, 0.5 * (zhi - zlo)
+
+
+def _draw(muscles, bones, scalars, clim, window, camera, scale) -> np.ndarray:
+    """One state as an RGB image of the framed sagittal view."""
+    import pyvista as pv
+
+    plotter = pv.Plotter(off_screen=True, window_size=window, border=False)
+    plotter.set_background("white")
+    for bone in bones:
+        plotter.add_mesh(bone, color=BONE_COLOUR, smooth_shading=True)
+    for name, mesh in muscles.items():
+        mesh = mesh.copy()
+        mesh.point_data["shown"] = scalars[name]
+        plotter.add_mesh(mesh.extract_surface(algorithm="dataset_surface"), scalars="shown", cmap="viridis",
+                         clim=clim, smooth_shading=True, show_scalar_bar=False)
+    plotter.camera_position = camera
+    plotter.enable_parallel_projection()
+    plotter.camera.parallel_scale = scale
+    image = plotter.screenshot(return_img=True)
+    plotter.close()
+    return image
+
+
+def _label_muscles(ax, muscles, frame) -> None:
+    """Name every muscle in a column beside the arm (extensors left, flexors right), a thin
+    leader line to the edge of its belly; labels kept apart vertically."""
+    (ylo, zlo), (yhi, zhi) = frame
+    gap, inset = 0.045 * (zhi - zlo), 0.04 * (yhi - ylo)
+    for side in ("left", "right"):
+        names = [n for n in muscles if (n in POSTERIOR) == (side == "left")]
+        if not names:
+            continue
+        everything = np.vstack([np.asarray(muscles[n].points) for n in names])
+        column = everything[:, 1].min() - inset if side == "left" else everything[:, 1].max() + inset
+        rows = []
+        for name in names:
+            p = np.asarray(muscles[name].points)
+            z0, z1 = np.percentile(p[:, 2], [35, 65])
+            belly = p[(p[:, 2] >= z0) & (p[:, 2] <= z1)]
+            tip = belly[np.argmin(belly[:, 1])] if side == "left" else belly[np.argmax(belly[:, 1])]
+            rows.append((name, tip[1], tip[2]))
+        rows.sort(key=lambda r: -r[2])
+        levels = []
+        for _, _, z in rows:  # top down, at least `gap` apart
+            levels.append(min(z, levels[-1] - gap) if levels else z)
+        for (name, y, z), level in zip(rows, levels):
+            ax.annotate(name, xy=(y, z), xytext=(column, level), fontsize=8, va="center",
+                        ha="right" if side == "left" else "left", annotation_clip=False,
+                        arrowprops={"arrowstyle": "-", "lw": 0.6, "color": "0.25", "shrinkA": 1, "shrinkB": 0})
+
+
+def _shown_displacement(states, reference):
+    """|u| per muscle node of every state: from the hanging arm if there is one, else the VTU's own."""
+    if reference is None:
+        return [{n: np.asarray(m[n]["displacement_magnitude"]) for n in MUSCLES} for _, m, _ in states]
+    base = states[reference][1]
+    return [{n: np.linalg.norm(np.asarray(m[n].points) - np.asarray(base[n].points), axis=1) for n in MUSCLES}
+            for _, m, _ in states]
+
+
+def render_states(directories: list[str | Path], out: str | Path, window: tuple[int, int] = (560, 720)) -> Path:
+    """Render each state into its own panel, side by side, with one shared colour scale.
+
+    ``window[1]`` is the height of a panel's 3D view in pixels (its width follows the arm's
+    extent); every panel shows the same box at the same scale.
+    """
+    headless_vtk()
     if not directories:
         raise ValueError("give at least one state directory")
-    summaries = [read_state_dir(d) for d in directories]
-    meshes = []
-    for d in directories:
-        d = Path(d)
-        muscles = [pv.read(d / f"{name}.vtu").extract_surface(algorithm="dataset_surface") for name in MUSCLES]
-        bones = [pv.read(p) for p in sorted(d.glob("bone_*.vtu"))]
-        meshes.append((muscles, bones))
-    everything = [m.points for muscles, bones in meshes for m in (*muscles, *bones)]
-    lo = np.min([p.min(axis=0) for p in everything], axis=0)
-    hi = np.max([p.max(axis=0) for p in everything], axis=0)
-    top = max(float(np.max(m["displacement_magnitude"])) for muscles, _ in meshes for m in muscles)
-    plotter = pv.Plotter(off_screen=True, shape=(1, len(directories)),
-                         window_size=(window[0] * len(directories), window[1]), border=False)
-    for k, ((muscles, bones), summary) in enumerate(zip(meshes, summaries)):
-        plotter.subplot(0, k)
-        for bone in bones:
-            plotter.add_mesh(bone, color="#d8d2c4", smooth_shading=True)
-        for muscle in muscles:
-            plotter.add_mesh(
-                muscle, scalars="displacement_magnitude", cmap="viridis", clim=(0.0, top), smooth_shading=True,
-                scalar_bar_args={"title": "displacement (mm)", "vertical": False} if k == 0 else None,
-                show_scalar_bar=(k == 0),
-            )
-        activations = ", ".join(f"{v:.2g}" for v in summary["activations"].values())
-        plotter.add_text(f"elbow {summary['elbow_angle_deg']:.1f} deg\nactivations ({activations})", font_size=11)
-        # the sagittal plane seen from +x (flexion to the right), every panel at the same scale
-        centre = 0.5 * (lo + hi)
-        distance = 1.15 * max(hi[1] - lo[1], hi[2] - lo[2]) / (2.0 * np.tan(np.radians(15.0)))
-        plotter.camera_position = [(centre[0] + distance, centre[1], centre[2]), tuple(centre), (0.0, 0.0, 1.0)]
-    out = Path(out)
+    states = [_load(Path(d)) for d in directories]
+    reference = _reference(states)
+    shown = _shown_displacement(states, reference)
+    # framed to the muscles (the bones are cut at the frame): every panel has the same height
+    # and scale, and its own width
+    boxes = [np.array([[p[:, 1].min(), p[:, 2].min()], [p[:, 1].max(), p[:, 2].max()]])
+             for p in (np.vstack([np.asarray(m.points) for m in muscles.values()]) for _, muscles, _ in states)]
+    zlo, zhi = min(b[0, 1] for b in boxes), max(b[1, 1] for b in boxes)
+    pad = 0.04 * (zhi - zlo)
+    frames = [np.array([[b[0, 0] - pad, zlo - pad], [b[1, 0] + pad, zhi + pad]]) for b in boxes]
+    top = max(1e-9, max(float(v.max()) for s in shown for v in s.values()))
+    images = []
+    for (_, muscles, bones), values, frame in zip(states, shown, frames):
+        images.append(_draw(muscles, bones, values, (0.0, top), *_camera(frame, window[1])))
+    return _compose(states, images, frames, reference, top, Path(out))
+
+
+def _compose(states, images, frames, reference, top, out: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    dpi = 110
+    spans = [f[1, 0] - f[0, 0] for f in frames]
+    margin = 0.3 * max(spans)  # room for the muscle labels either side of the first panel
+    widths = [spans[0] + 2 * margin, *spans[1:], 0.04 * sum(spans)]
+    scale = images[0].shape[0] / (frames[0][1, 1] - frames[0][0, 1])  # pixels per mm, the same in every panel
+    fig, axes = plt.subplots(1, len(states) + 1, figsize=(scale * sum(widths) / dpi + 1.2, images[0].shape[0] / dpi + 0.9),
+                             gridspec_kw={"width_ratios": widths}, layout="constrained")
+    for k, (ax, (summary, muscles, _), image, frame) in enumerate(zip(axes, states, images, frames)):
+        (ylo, zlo), (yhi, zhi) = frame
+        ax.imshow(image, extent=(ylo, yhi, zlo, zhi), interpolation="antialiased")
+        ax.set_xlim((ylo - margin, yhi + margin) if k == 0 else (ylo, yhi))
+        ax.set_ylim(zlo, zhi)
+        ax.set_axis_off()
+        alpha = ", ".join(f"{v:.2g}" for v in summary["activations"].values())
+        note = ", the reference" if k == reference else ""
+        ax.set_title(f"alpha = ({alpha})\nelbow {summary['elbow_angle_deg']:.1f} deg{note}", fontsize=9)
+        if k == 0:
+            _label_muscles(ax, muscles, frame)
+    origin = "the hanging arm (alpha = 0)" if reference is not None else "the muscles' mesh poses"
+    fig.colorbar(ScalarMappable(Normalize(0.0, top), "viridis"), cax=axes[-1],
+                 label=f"displacement (mm)\nfrom {origin}")
+    profile = states[0][0].get("profile")
+    title = (f"FE arm{f' ({profile} profile)' if profile else ''}, side view, flexion to the right; "
+             f"alpha = activations of ({', '.join(MUSCLES)})")
+    fig.suptitle(textwrap.fill(title, max(40, int(fig.get_figwidth() * dpi / 7))), fontsize=9)
     out.parent.mkdir(parents=True, exist_ok=True)
-    plotter.screenshot(out)
-    plotter.close()
+    fig.savefig(out, dpi=dpi)
+    plt.close(fig)
     return out
