@@ -205,7 +205,7 @@ def _print_table(console, table, seconds: float, out: Path) -> None:
 
     t = Table(title=f"fully active moments (N mm) and failed solves; {seconds:.0f} s this run, {out}")
     t.add_column("muscle")
-    picks = [k for k in range(len(table.angles_deg)) if k % max(1, len(table.angles_deg) // 6) == 0]
+    picks = [k for k in range(len(table.angles_deg)) if k % max(1, len(table.angles_deg) // 4) == 0]
     for k in picks:
         t.add_column(f"{table.angles_deg[k]:g} deg", justify="right")
     t.add_column("NaN", justify="right")

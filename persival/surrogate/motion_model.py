@@ -62,9 +62,8 @@ def least_effort(V, levels, required, iterations: int = 90):
 
     Dual bisection on the multiplier lam (the per-muscle response is monotone in lam), then a
     bisection along the segment between the two last responses, which closes any duality gap
-    left where a muscle's moment is not concave in a. Returns activations (n, 5) and feasible
-    (n,): required within [sum_m min_a M_m, sum_m max_a M_m]; infeasible rows get the
-    best-effort (saturated) activations.
+    left where a muscle's moment is not concave in a. Returns activations (n, 5) and feasible (n,):
+    required in [sum_m min_a M_m, sum_m max_a M_m]; infeasible rows get the saturated best effort.
     """
     V, levels, R = np.asarray(V, float), np.asarray(levels, float), np.asarray(required, float)
     passive = V[:, :, 0].sum(axis=1)
@@ -128,20 +127,16 @@ class MotionActivationModel:
 
     # ------------------------------------------------------------------ evaluation
     def _check(self, motion) -> np.ndarray:
-        m = np.array(motion, dtype=np.float64)
-        m = m[None, :] if m.ndim == 1 else m
+        m = np.atleast_2d(np.array(motion, dtype=np.float64))
         if m.ndim != 2 or m.shape[1] != 4:
-            raise ValueError(f"motion must have shape (n, 4): angle deg, velocity deg/s, acceleration deg/s^2, load kg; "
-                             f"got {m.shape}")
+            raise ValueError(f"motion must have shape (n, 4) (deg, deg/s, deg/s^2, kg), got {m.shape}")
         if not np.isfinite(m).all():
             raise ValueError(f"motion: {int((~np.isfinite(m).all(axis=1)).sum())} row(s) are not finite")
         if (m[:, 3] < 0).any():
             raise ValueError(f"motion: the load must be >= 0 kg, got {float(m[m[:, 3] < 0, 3][0])!r}")
-        lo, hi = self.range_deg
-        outside = (m[:, 0] < lo - 1e-9) | (m[:, 0] > hi + 1e-9)
-        if outside.any():
-            raise ValueError(f"motion: elbow angle {float(m[outside, 0][0]):.3f} deg is outside the model's range "
-                             f"{lo:.2f} to {hi:.2f} deg")
+        (lo, hi), out = self.range_deg, m[(m[:, 0] < self.range_deg[0] - 1e-9) | (m[:, 0] > self.range_deg[1] + 1e-9)]
+        if len(out):
+            raise ValueError(f"motion: elbow angle {out[0, 0]:.3f} deg is outside the model's range {lo:.2f} to {hi:.2f} deg")
         return m
 
     def required_moment(self, motion) -> np.ndarray:
@@ -244,7 +239,7 @@ class MotionActivationModel:
         if diff > 1e-6:
             raise RuntimeError(f"activation_motion.onnx differs from Python by {diff:.2e} (tolerance 1e-6)")
         holdable = self.holdable_load_kg(np.arange(np.ceil(self.range_deg[0] / 10) * 10, self.range_deg[1] + 1e-9, 10.0))
-        finite = holdable[np.isfinite(holdable)]
+        finite = holdable[np.isfinite(holdable)]  # max_load_kg: the most held anywhere (at 10-degree steps)
         return {"file": _ONNX_NAME, "input": "motion", "output": "activations", "outputs": ["activations", "moment_deficit_Nmm"],
                 "input_columns": ["angle_deg", "velocity_deg_s", "acceleration_deg_s2", "load_kg"],
                 "range_deg": list(self.range_deg), "max_load_kg": float(finite.max()) if len(finite) else 0.0,
@@ -252,8 +247,7 @@ class MotionActivationModel:
                 "max_abs_diff_vs_python": diff, **{k: v for k, v in self.params.items() if not k.startswith("table_")}}
 
     def save(self, folder: str | Path) -> Path:
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
+        (folder := Path(folder)).mkdir(parents=True, exist_ok=True)
         np.savez(folder / "motion_model.npz", theta=self.theta, s=self.s, alpha=self.alpha, base=self.base,
                  m_min=self.m_min, m_max=self.m_max)
         (folder / "motion_model.json").write_text(json.dumps({"kind": "motion-activation-model", **self.params}, indent=1))
@@ -261,8 +255,7 @@ class MotionActivationModel:
 
     @classmethod
     def load(cls, folder: str | Path) -> MotionActivationModel:
-        folder = Path(folder)
-        params = json.loads((folder / "motion_model.json").read_text())
+        params = json.loads(((folder := Path(folder)) / "motion_model.json").read_text())
         if params.pop("kind", None) != "motion-activation-model":
             raise ValueError(f"{folder} does not hold a motion activation model")
         with np.load(folder / "motion_model.npz") as d:
@@ -290,15 +283,13 @@ def plot_motion_model(model: MotionActivationModel, path: str | Path, loads=(0.0
             ax.plot(theta, np.where(ok, np.nan, a[:, m]), color=colour, ls=":")
         axes.flat[5].plot(theta, model.required_moment(motion) / 1e3, color=colour, label=f"required, {load:g} kg")
     for m, ax in enumerate(axes.flat[:5]):
-        ax.set_title(MUSCLES[m])
-        ax.set_ylim(-0.03, 1.03)
+        ax.set(title=MUSCLES[m], ylim=(-0.03, 1.03))
         ax.grid(alpha=0.3)
-    ax = axes.flat[5]
-    ax.plot(model.theta, model.m_max / 1e3, "k-", label="max muscle moment")
-    ax.plot(model.theta, model.m_min / 1e3, "k--", label="min muscle moment")
-    ax.set_title("moment about the elbow (N m)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
+    axes.flat[5].plot(model.theta, model.m_max / 1e3, "k-", label="max muscle moment")
+    axes.flat[5].plot(model.theta, model.m_min / 1e3, "k--", label="min muscle moment")
+    axes.flat[5].set(title="moment about the elbow (N m)")
+    axes.flat[5].grid(alpha=0.3)
+    axes.flat[5].legend(fontsize=7)
     axes.flat[0].legend(fontsize=8)
     for ax in axes[1]:
         ax.set_xlabel("elbow angle (deg), zero velocity and acceleration")
