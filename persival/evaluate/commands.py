@@ -72,12 +72,12 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
 
     @app.command()
     def accuracy(
-        test: Path = typer.Option(..., "--test", help="Campaign store of held-out FE states (e.g. a random design)."),
+        test: Path = typer.Option(..., "--test", help="Campaign store of held-out states (e.g. a random design)."),
         surrogate: list[str] = typer.Option(
             ..., "--surrogate", help="LABEL=DIR of a fitted surface surrogate (fit-sg or adapt), repeatable."),
         out: Path = typer.Option(Path("results/accuracy"), "--out", help="Output directory (accuracy.json, accuracy.png)."),
     ) -> None:
-        """Surrogates vs held-out FE states: MaxAE, MAE, MaxRE, MRE (SPEC 7) and elbow-angle error."""
+        """Surrogates vs held-out states (FE or analytic: the report says which): MaxAE, MAE, MaxRE, MRE (SPEC 7), angle error."""
         import json
 
         from rich.console import Console
@@ -99,8 +99,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                      "make one with `persival surrogate fit-sg` or `surrogate adapt`)")
                 labelled[label] = Path(path)
             report = accuracy_report(labelled, test)
-        table = Table(title=f"surface surrogates vs {report['test_states']} held-out FE states ({test})")
-        columns = [("FE states", "fe_states", "{:d}"), ("MaxAE mm", "max MaxAE_mm", "{:.3f}"),
+        table = Table(title=f"surface surrogates vs {report['test_source']['label']} held out ({test})")
+        columns = [("training states", "states", "{:d}"), ("MaxAE mm", "max MaxAE_mm", "{:.3f}"),
                    ("MAE mm", "mean MAE_mm", "{:.3f}"), ("MaxRE %", "max MaxRE_pct", "{:.2f}"),
                    ("MRE %", "mean MRE_pct", "{:.3f}"), ("max angle err deg", "max angle_error_deg", "{:.3f}"),
                    ("mean angle err deg", "mean angle_error_deg", "{:.3f}")]
