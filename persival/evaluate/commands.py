@@ -68,7 +68,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         serial = {k: (v.tolist() if isinstance(v, np.ndarray) else {kk: vv.tolist() for kk, vv in v.items()})
                   for k, v in data.items()}
         (out / "curves.json").write_text(json.dumps({"profile": profile, "curves": serial, "predicted_deg": predicted}, indent=1))
-        console.print(f"wrote {out / 'curves.json'} and {plot_curves(data, out / 'curves.png')}")
+        console.print(f"wrote {out / 'curves.json'} and {plot_curves({**data, 'profile': profile}, out / 'curves.png')}")
 
     @app.command()
     def accuracy(

@@ -97,6 +97,9 @@ def plot_curves(curves: dict, path: str | Path) -> Path:
         ax.set_xlabel("elbow angle (deg)")
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("moment about the elbow (N mm, flexion +)")
-    axes[1].legend(fontsize=8)
+    # beside the panels: inside, the legend covered the curves of the real sweeps
+    axes[1].legend(fontsize=8, loc="center left", bbox_to_anchor=(1.02, 0.5))
+    profile = f" ({curves['profile']} profile)" if curves.get("profile") else ""
+    fig.suptitle(f"FE arm{profile}: each muscle's moment, swept alone along the elbow angle", fontsize=10)
     fig.tight_layout()
     return save_figure(fig, path, dpi=120)
