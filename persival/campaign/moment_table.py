@@ -54,8 +54,9 @@ def sweep_muscle(arm, muscle, angles, activation: float, max_step_deg: float = 1
     """One muscle's FE equilibria along ``angles`` (deg) at a fixed activation (SPEC 3.3).
 
     Continuation along theta, each solve warm-started from its neighbour, in steps of at most
-    ``max_step_deg`` (points between the asked angles are solved and not returned: a 40-degree
-    step lets a shortening active biceps land on another, buckled branch). The passive sweep
+    ``max_step_deg`` (points between the asked angles are solved, not returned: short steps
+    converge faster; on the coarse mesh 0:160:40 direct took 750 s, 0:160:20 in 10-degree steps
+    600 s, and the tensions at the shared angles agree to 1e-8 N). The passive sweep
     starts at the angle nearest the mesh pose; an active one where the muscle is longest
     (activating a slack, bowed muscle in place is a snap-through, not a continuation), reached
     passively first. Both run outwards from the start; the first failure ends a direction and
