@@ -11,10 +11,9 @@ continuation along theta from a stretched start (:func:`sweep_muscle`, also behi
 cubic Hermite interpolant (slopes dT/dtheta = k dL/dtheta from the FE axial stiffness) times the
 exact moment arm; between activation levels it is linear.
 
-Files: one ``.npz`` with the arrays and a JSON header (model hash, mesh profile, grids, which
-(muscle, level) columns are done). A build writes the file after every column (atomically), so
-a killed build resumes without recomputing finished columns; :meth:`MomentTable.load` refuses a
-table of another model or profile, naming the mismatch.
+Files: one ``.npz``, arrays and a JSON header (model hash, profile, which columns are done),
+written atomically after every (muscle, level) column: a killed build resumes without redoing
+finished columns. :meth:`MomentTable.load` refuses another model's or profile's table.
 """
 
 from __future__ import annotations
@@ -50,7 +49,7 @@ def _path(angles: np.ndarray, max_step_deg: float) -> tuple[np.ndarray, np.ndarr
     return path, np.searchsorted(path, angles - 1e-9)
 
 
-def sweep_muscle(arm, muscle, angles, activation: float, max_step_deg: float = 10.0) -> dict[str, np.ndarray]:
+def sweep_muscle(arm, muscle, angles, activation: float, max_step_deg: float = 10.0, start=None) -> dict:
     """One muscle's FE equilibria along ``angles`` (deg) at a fixed activation (SPEC 3.3).
 
     Continuation along theta, each solve warm-started from its neighbour, in steps of at most
@@ -59,9 +58,11 @@ def sweep_muscle(arm, muscle, angles, activation: float, max_step_deg: float = 1
     600 s, and the tensions at the shared angles agree to 1e-8 N). The passive sweep
     starts at the angle nearest the mesh pose; an active one where the muscle is longest
     (activating a slack, bowed muscle in place is a snap-through, not a continuation), reached
-    passively first. Both run outwards from the start; the first failure ends a direction and
-    leaves the rest NaN. Returns tension T (N), axial stiffness k = dT/dL (N/mm), the moment
-    -T dL/dtheta (N mm, flexion positive) and the length geometry at ``angles``.
+    passively first, or activated from ``start`` (a state at that longest length, e.g. the previous
+    level's ``longest_state``: continuation along a). Both run outwards from the start; the first
+    failure ends a direction and leaves the rest NaN. Returns tension T (N), axial stiffness
+    k = dT/dL (N/mm), the moment -T dL/dtheta (N mm, flexion positive) and the length geometry at
+    ``angles``, and the state at the longest length.
     """
     angles = np.asarray(angles, dtype=float)
     path, index = _path(angles, max_step_deg)
@@ -69,12 +70,16 @@ def sweep_muscle(arm, muscle, angles, activation: float, max_step_deg: float = 1
     geometry = np.array([arm.muscle_length(muscle, t) for t in path])
     lengths = geometry[:, 0]
     tension, stiffness = np.full(len(path), np.nan), np.full(len(path), np.nan)
-    first = int(np.argmin(np.abs(path - muscle.mesh_angle_deg))) if activation == 0.0 else int(np.argmax(lengths))
-    try:
-        origin = unit.solve(lengths[first], 0.0, unit.rest_state())
-        origin = unit.solve(lengths[first], float(activation), origin)
-    except ConvergenceError:
-        origin = None
+    longest = int(np.argmax(lengths))
+    first = int(np.argmin(np.abs(path - muscle.mesh_angle_deg))) if activation == 0.0 else longest
+    origin, states = None, {}
+    for begin in ([start] if start is not None and first == longest else []) + [None]:
+        try:
+            origin = begin or unit.solve(lengths[first], 0.0, unit.rest_state())
+            origin = unit.solve(lengths[first], float(activation), origin)
+            break
+        except ConvergenceError:
+            origin = None
     if origin is not None:
         for sweep in (range(first, len(path)), range(first, -1, -1)):
             state = origin
@@ -84,9 +89,10 @@ def sweep_muscle(arm, muscle, angles, activation: float, max_step_deg: float = 1
                 except ConvergenceError:
                     break
                 tension[k], stiffness[k] = state.tension, state.stiffness
+                states[k] = state
     dL = geometry[index, 1]
     return {"length_mm": lengths[index], "dL_dtheta_mm_per_rad": dL, "tension_N": tension[index],
-            "stiffness_N_per_mm": stiffness[index], "moment_Nmm": -tension[index] * dL}
+            "stiffness_N_per_mm": stiffness[index], "moment_Nmm": -tension[index] * dL, "longest_state": states.get(longest)}
 
 
 @dataclass
@@ -120,18 +126,12 @@ class MomentTable:
         return bool(self.done.all())
 
     def finite_range_deg(self) -> tuple[float, float]:
-        """The widest run of table angles (around the middle) where every column is finite."""
+        """The widest run of table angles where every column is finite."""
         ok = np.isfinite(self.tension).all(axis=(0, 2))
         if not ok.any():
             raise ValueError("the table has no angle where every muscle converged at every level")
-        runs, start = [], None
-        for k, good in enumerate([*ok, False]):
-            if good and start is None:
-                start = k
-            elif not good and start is not None:
-                runs.append((start, k - 1))
-                start = None
-        lo, hi = max(runs, key=lambda r: r[1] - r[0])
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(int), [0]])))  # run starts, ends + 1
+        lo, hi = max(zip(edges[::2], edges[1::2] - 1), key=lambda r: r[1] - r[0])
         return float(self.angles_deg[lo]), float(self.angles_deg[hi])
 
     # ------------------------------------------------------------------ interpolation
@@ -273,7 +273,7 @@ def build_moment_table(arm_or_profile, angles_deg, activations, progress=None, o
         arm = ArmModel(model_file, profile=arm_or_profile)
     table = resumable(out, arm.model_hash, arm.profile, angles, levels) if out is not None else None
     table = table or _new_table(arm, angles, levels)
-    total, count = table.done.size, 0
+    total, count, longest = table.done.size, 0, {}
     for m, muscle in enumerate(arm.spec.ordered_muscles()):
         for j, a in enumerate(levels):
             count += 1
@@ -284,7 +284,8 @@ def build_moment_table(arm_or_profile, angles_deg, activations, progress=None, o
                     progress(count, total, f"{muscle.name} a={a:g} (skipped: done)")
                 continue
             t0 = time.perf_counter()
-            sweep = sweep_muscle(arm, muscle, angles, float(a))
+            sweep = sweep_muscle(arm, muscle, angles, float(a), start=longest.get(muscle.name))
+            longest[muscle.name] = sweep["longest_state"]  # the next level continues from it
             table.tension[m, :, j], table.stiffness[m, :, j] = sweep["tension_N"], sweep["stiffness_N_per_mm"]
             table.done[m, j] = True
             table.meta["column_seconds"][m][j] = time.perf_counter() - t0
