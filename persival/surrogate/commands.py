@@ -188,7 +188,7 @@ def _register_inverse_and_networks(app: typer.Typer) -> None:
         muscle: str = typer.Option("all", "--muscle", help="Muscles to learn: all, or a comma-separated list."),
         folds: int = typer.Option(5, "--folds", min=1, help="Cross-validation folds."),
         epochs: int = typer.Option(400, "--epochs", min=1, help="Epochs per fold."),
-        activation: str = typer.Option("silu", "--activation", help="relu, tanh, silu or elu."),
+        activation: str = typer.Option("relu", "--activation", help="relu (default: best by validation), tanh, silu or elu."),
         batch_size: int = typer.Option(64, "--batch-size", min=1),
         learning_rate: float = typer.Option(1e-3, "--learning-rate", min=0.0),
         rank: int = typer.Option(None, "--rank", min=1, help="POD rank (default: by the energy criterion)."),

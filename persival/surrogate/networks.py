@@ -127,7 +127,7 @@ def pod_basis(displacements: np.ndarray, rank: int | None = None, energy: float 
 class PodNet(nn.Module):
     """alpha -> normalized (POD coefficients, elbow angle); the basis is applied outside training."""
 
-    def __init__(self, n_nodes: int, rank: int, hidden=(64, 64, 64), activation: str = "silu") -> None:
+    def __init__(self, n_nodes: int, rank: int, hidden=(64, 64, 64), activation: str = "relu") -> None:
         super().__init__()
         self.config = {"arch": "pod", "n_nodes": n_nodes, "rank": rank, "hidden": list(hidden),
                        "activation": activation}
