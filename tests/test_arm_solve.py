@@ -113,7 +113,7 @@ def test_state_files_and_render(arm, states, tmp_path):
 
     image = np.asarray(Image.open(png).convert("RGB")).astype(float)
     assert image.shape[0] > 260 and image.shape[1] > 1.2 * image.shape[0]  # panels side by side, titles, colour bar
-    assert (image.min(axis=2) < 245).mean() > 0.2  # framed to the arm, not mostly white
+    assert (image.min(axis=2) < 245).mean() > 0.18  # framed to the arm, not mostly white (before: 0.12)
     assert (image.std(axis=2) > 10).mean() > 0.05  # coloured muscles (bones are grey)
     with pytest.raises(FileNotFoundError, match="state.json"):
         render_states([tmp_path], tmp_path / "x.png")

@@ -109,7 +109,7 @@ def _draw(muscles, bones, scalars, clim, window, camera, scale) -> np.ndarray:
     return image
 
 
-def _label_muscles(ax, muscles, frame) -> None:
+def _label_muscles(ax, muscles, frame, fontsize: float) -> None:
     """Name every muscle in a column beside the arm (extensors left, flexors right), a thin
     leader line to the edge of its belly; labels kept apart vertically."""
     (ylo, zlo), (yhi, zhi) = frame
@@ -132,7 +132,7 @@ def _label_muscles(ax, muscles, frame) -> None:
         for _, _, z in rows:  # top down, at least `gap` apart
             levels.append(min(z, levels[-1] - gap) if levels else z)
         for (name, y, z), level in zip(rows, levels):
-            ax.annotate(name, xy=(y, z), xytext=(column, level), fontsize=8, va="center",
+            ax.annotate(name, xy=(y, z), xytext=(column, level), fontsize=fontsize, va="center",
                         ha="right" if side == "left" else "left", annotation_clip=False,
                         arrowprops={"arrowstyle": "-", "lw": 0.6, "color": "0.25", "shrinkA": 1, "shrinkB": 0})
 
@@ -180,31 +180,36 @@ def _compose(states, images, frames, reference, top, out: Path) -> Path:
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
 
-    dpi = 110
-    spans = [f[1, 0] - f[0, 0] for f in frames]
+    dpi, height_px = 110, images[0].shape[0]
+    scale = height_px / (frames[0][1, 1] - frames[0][0, 1])  # pixels per mm, the same in every panel
+    # text scaled with the panels, and panels at least as wide as their titles (small pictures)
+    fontsize = float(np.clip(9.0 * height_px / 600.0, 6.5, 9.0))
+    least = 25 * 0.6 * fontsize * dpi / 72.0 / scale
+    spans = [max(f[1, 0] - f[0, 0], least) for f in frames]
     margin = 0.3 * max(spans)  # room for the muscle labels either side of the first panel
     widths = [spans[0] + 2 * margin, *spans[1:], 0.04 * sum(spans)]
-    scale = images[0].shape[0] / (frames[0][1, 1] - frames[0][0, 1])  # pixels per mm, the same in every panel
     fig, axes = plt.subplots(1, len(states) + 1, figsize=(scale * sum(widths) / dpi + 1.2, images[0].shape[0] / dpi + 0.9),
                              gridspec_kw={"width_ratios": widths}, layout="constrained")
     for k, (ax, (summary, muscles, _), image, frame) in enumerate(zip(axes, states, images, frames)):
         (ylo, zlo), (yhi, zhi) = frame
         ax.imshow(image, extent=(ylo, yhi, zlo, zhi), interpolation="antialiased")
-        ax.set_xlim((ylo - margin, yhi + margin) if k == 0 else (ylo, yhi))
+        half = 0.5 * widths[k]
+        ax.set_xlim(0.5 * (ylo + yhi) - half, 0.5 * (ylo + yhi) + half)
         ax.set_ylim(zlo, zhi)
         ax.set_axis_off()
         alpha = ", ".join(f"{v:.2g}" for v in summary["activations"].values())
-        note = ", the reference" if k == reference else ""
-        ax.set_title(f"alpha = ({alpha})\nelbow {summary['elbow_angle_deg']:.1f} deg{note}", fontsize=9)
+        note = " (reference)" if k == reference else ""
+        ax.set_title(f"alpha = ({alpha})\nelbow {summary['elbow_angle_deg']:.1f} deg{note}", fontsize=fontsize)
         if k == 0:
-            _label_muscles(ax, muscles, frame)
+            _label_muscles(ax, muscles, frame, fontsize - 1)
     origin = "the hanging arm (alpha = 0)" if reference is not None else "the muscles' mesh poses"
-    fig.colorbar(ScalarMappable(Normalize(0.0, top), "viridis"), cax=axes[-1],
-                 label=f"displacement (mm)\nfrom {origin}")
+    bar = fig.colorbar(ScalarMappable(Normalize(0.0, top), "viridis"), cax=axes[-1])
+    bar.set_label(f"displacement (mm)\nfrom {origin}", fontsize=fontsize)
+    bar.ax.tick_params(labelsize=fontsize)
     profile = states[0][0].get("profile")
     title = (f"FE arm{f' ({profile} profile)' if profile else ''}, side view, flexion to the right; "
              f"alpha = activations of ({', '.join(MUSCLES)})")
-    fig.suptitle(textwrap.fill(title, max(40, int(fig.get_figwidth() * dpi / 7))), fontsize=9)
+    fig.suptitle(textwrap.fill(title, max(40, int(fig.get_figwidth() * 72 / (0.55 * fontsize)))), fontsize=fontsize)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=dpi)
     plt.close(fig)
