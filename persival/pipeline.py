@@ -5,11 +5,12 @@
     3 campaign  OUT/campaign/  campaign.zarr (sparse-grid design) + held_out.zarr (random states)
     4 sg        OUT/sg/        B-spline SG of all five muscles' surfaces + the elbow angle
     5 inverse   OUT/inverse/   activation_model.json (Theta -> alpha_opt) + plot
-    6 data      OUT/data/      SG training data (alpha_opt(Theta) and random alpha)
-    7 train     OUT/networks/  pod/ (all muscles) and paper/ (the paper's net, biceps)
-    8 export    OUT/export/    ONNX models + metadata.json (SPEC 9)
-    9 evaluate  OUT/evaluate/  the paper's tables and figures
-   10 report    OUT/report/    index.html + results.json
+    6 motion    OUT/motion/    (angle, velocity, acceleration, load) -> alpha, from an FE moment table
+    7 data      OUT/data/      SG training data (alpha_opt(Theta) and random alpha)
+    8 train     OUT/networks/  pod/ (all muscles) and paper/ (the paper's net, biceps)
+    9 export    OUT/export/    ONNX models + metadata.json (SPEC 9)
+   10 evaluate  OUT/evaluate/  the paper's tables and figures
+   11 report    OUT/report/    index.html + results.json
 
 Resumable stage by stage: every stage leaves ``OUT/<stage>/stage.json`` with the digest of its
 inputs (its own settings plus the digests of the stages it reads); a stage whose digest is
@@ -38,6 +39,7 @@ class RunConfig:
     held_out: int = 25  # random states of the same simulator for the error-propagation table
     campaign_store: str | None = None  # reuse a finished campaign instead of running one
     held_out_store: str | None = None
+    moment_table: str | None = None  # FE moment table of the same arm (persival moments): the motion model
     samples: int = 4000  # SG training states
     angle_fraction: float = 0.5
     pod_folds: int = 5
@@ -55,9 +57,10 @@ STAGES = [
     ("campaign", "sparse-grid campaign + random held-out states", []),
     ("sg", "B-spline sparse grid of five muscle surfaces + elbow angle", ["campaign"]),
     ("inverse", "least-effort activations: the angle activation model", ["sg"]),
+    ("motion", "motion-and-load activation model from the FE moment table", ["sg"]),
     ("data", "SG training data at alpha_opt(Theta) and random alpha", ["sg", "inverse"]),
     ("train", "POD network (five muscles) and the paper's network (biceps)", ["data"]),
-    ("export", "ONNX models + metadata.json", ["train", "inverse"]),
+    ("export", "ONNX models + metadata.json", ["train", "inverse", "motion"]),
     ("evaluate", "the paper's accuracy and speed tables", ["export", "campaign", "sg", "train", "data"]),
     ("report", "HTML report", ["evaluate", "fe", "model"]),
 ]

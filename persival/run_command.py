@@ -23,6 +23,8 @@ def register(app: typer.Typer) -> None:
         level: int = typer.Option(1, "--level", min=1, max=3, help="Sparse-grid level of the campaign (1: 243, 2: 1053)."),
         campaign_store: Path = typer.Option(None, "--campaign-store", help="Reuse a finished sparse-grid campaign store."),
         held_out_store: Path = typer.Option(None, "--held-out-store", help="Reuse a finished held-out campaign store."),
+        moment_table: Path = typer.Option(None, "--moment-table", help="FE moment table of the same arm (persival "
+                                          "moments): adds the motion-and-load activation model."),
         held_out: int = typer.Option(25, "--held-out", min=1, help="Random held-out states of the campaign's simulator."),
         samples: int = typer.Option(4000, "--samples", min=10, help="SG training states for the networks."),
         pod_epochs: int = typer.Option(100, "--pod-epochs", min=1, help="POD network: epochs per fold (5 folds)."),
@@ -39,12 +41,15 @@ def register(app: typer.Typer) -> None:
             check_output_dir(out)
             if simulator not in ("analytic", "arm"):
                 raise ValueError(f"--simulator must be analytic or arm, got {simulator!r}")
+            if moment_table is not None and not moment_table.exists():
+                raise FileNotFoundError(f"--moment-table {moment_table}: no such file")
             for given in (campaign_store, held_out_store):
                 if given is not None and not (given / "zarr.json").is_file():
                     raise FileNotFoundError(f"{given}: not a campaign store (no zarr.json)")
             config = RunConfig(profile=profile, simulator=simulator, level=level, held_out=held_out,
                                campaign_store=None if campaign_store is None else str(campaign_store.resolve()),
                                held_out_store=None if held_out_store is None else str(held_out_store.resolve()),
+                               moment_table=None if moment_table is None else str(moment_table.resolve()),
                                samples=samples, pod_epochs=pod_epochs, paper_epochs=paper_epochs, fe_states=fe_states)
         # A user error half-way (e.g. a bad store) removes an output folder this run created;
         # an internal error keeps what was written, for --debug.

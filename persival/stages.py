@@ -11,6 +11,8 @@ import json
 import time
 from pathlib import Path
 
+import numpy as np
+
 __all__ = ["RUNNERS", "SETTINGS", "print_results"]
 
 
@@ -134,6 +136,29 @@ def inverse(out: Path, config, console) -> dict:
             "branch_notes": model.branch_notes, "examples": solution.rows()}
 
 
+def motion(out: Path, config, console) -> dict:
+    """The motion model needs per-muscle FE moments: a moment table of the same arm model."""
+    from persival.campaign.moment_table import MomentTable
+    from persival.surrogate.base import load_surrogate
+    from persival.surrogate.motion_model import MotionActivationModel, plot_motion_model
+
+    if config.moment_table is None:
+        why = ("the analytic stand-in has no muscle moments" if config.simulator != "arm" else
+               "no --moment-table given (build one: persival moments --profile PROFILE --out FILE)")
+        console.print(f"  [yellow]skipped[/yellow]: {why}; the export has no activation_motion model")
+        return {"skipped": why}
+    sg = load_surrogate(out / "sg")
+    table = MomentTable.load(config.moment_table, model_hash=sg.metadata.get("model_hash"), profile=config.profile)
+    model = MotionActivationModel.build(table)
+    model.save(out / "motion")
+    plot_motion_model(model, out / "motion" / "motion_model.png")
+    holdable = model.holdable_load_kg(np.array([30.0, 60.0, 90.0, 120.0]))
+    console.print(f"  range {model.range_deg[0]:.0f}-{model.range_deg[1]:.0f} deg; holdable load at 30/60/90/120 deg: "
+                  + " / ".join(f"{h:.2f}" for h in holdable) + " kg")
+    return {"range_deg": list(model.range_deg), "holdable_load_kg_30_60_90_120": holdable.tolist(),
+            "table": config.moment_table}
+
+
 def data(out: Path, config, console) -> dict:
     from persival.surrogate.stage import make_training_data
 
@@ -181,7 +206,12 @@ def export(out: Path, config, console) -> dict:
 
     network = load_surrogate(out / "networks" / "pod")
     model = AngleActivationModel.load(out / "inverse" / "activation_model.json")
-    meta = export_model(network, out / "export", activation_model=model)
+    motion_model = None
+    if (out / "motion" / "motion_model.json").exists():
+        from persival.surrogate.motion_model import MotionActivationModel
+
+        motion_model = MotionActivationModel.load(out / "motion")
+    meta = export_model(network, out / "export", activation_model=model, motion_model=motion_model)
     for tier, v in meta["models"]["deformation"]["variants"].items():
         console.print(f"  {tier:8s} {v['file']:25s} {v['bytes'] / 1e6:5.3f} MB, |ONNX - torch| <= "
                       f"{v['max_abs_diff_vs_torch']['positions']:.1e} mm")
@@ -208,12 +238,12 @@ def report(out: Path, config, console) -> dict:
 SETTINGS = {
     "model": ["profile"], "fe": ["profile"],
     "campaign": ["profile", "simulator", "level", "held_out", "campaign_store", "held_out_store", "seed"],
-    "sg": [], "inverse": [], "data": ["samples", "angle_fraction", "seed"],
+    "sg": [], "inverse": [], "motion": ["moment_table", "profile"], "data": ["samples", "angle_fraction", "seed"],
     "train": ["pod_folds", "pod_epochs", "paper_folds", "paper_epochs", "seed"], "export": [],
     "evaluate": ["seed"], "report": [],
 }
-RUNNERS = {"model": model, "fe": fe, "campaign": campaign, "sg": sg, "inverse": inverse, "data": data, "train": train,
-           "export": export, "evaluate": evaluate, "report": report}
+RUNNERS = {"model": model, "fe": fe, "campaign": campaign, "sg": sg, "inverse": inverse, "motion": motion, "data": data,
+           "train": train, "export": export, "evaluate": evaluate, "report": report}
 
 
 def print_results(out: Path, console, total_s: float, stages_s: float) -> None:
