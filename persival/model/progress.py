@@ -84,7 +84,7 @@ class ConsoleProgress:
     ``every_s`` seconds instead.
     """
 
-    def __init__(self, console, status=None, label: str = "", every_s: float = 8.0) -> None:
+    def __init__(self, console, status=None, label: str = "", every_s: float = 6.0) -> None:
         self.console, self.status, self.every_s = console, status, every_s
         self.prefix = f"{label}: " if label else ""
         self.text = "starting"
@@ -120,5 +120,5 @@ class ConsoleProgress:
             self.status.update(Text(text))
         now = time.perf_counter()
         if (self.status is None or not self.console.is_terminal) and now - self._printed >= self.every_s:
-            self.console.print(f"  {text}", highlight=False, markup=False)
+            self.console.print(f"  {text}", highlight=False, markup=False, soft_wrap=True)  # a log line, not wrapped at 80
             self._printed = now
