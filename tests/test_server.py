@@ -1,9 +1,11 @@
 """The inference server (persival serve) and its artifact loader: API, limits, files, errors, load.
 
-The export folder comes from one fixture, `export_dir` (below, with its builder): a real
-analytic simulator's surfaces and states, a quadratic least-squares deformation model written
-as ONNX, and a metadata.json laid out as docs/deployment.md says. Swap the builder for
-persival.deploy.export once it lands; nothing else here depends on how the folder was made.
+The export folder is the real one of the session's small run (tests/conftest.py: analytic
+campaign -> SG -> POD net -> persival.deploy.export). That run has no motion model (the analytic
+stand-in has no muscle moments), so the requests with a load go to a second, contract-only
+folder (`motion_export_dir`, built below from the analytic simulator's states with a
+least-squares deformation model and a motion model as plain ONNX graphs, laid out as
+docs/deployment.md says).
 """
 
 from __future__ import annotations
@@ -156,7 +158,12 @@ def build_contract_export(folder: Path) -> Path:
 
 
 @pytest.fixture(scope="session")
-def export_dir(tmp_path_factory) -> Path:
+def export_dir(small_run) -> Path:
+    return small_run / "export"
+
+
+@pytest.fixture(scope="session")
+def motion_export_dir(tmp_path_factory) -> Path:
     return build_contract_export(tmp_path_factory.mktemp("export") / "export")
 
 
@@ -204,6 +211,16 @@ def client(export_dir):
 
 
 @pytest.fixture(scope="module")
+def motion_client(motion_export_dir):
+    from fastapi.testclient import TestClient
+
+    from persival.deploy.server import create_app
+
+    with TestClient(create_app(motion_export_dir)) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
 def live(export_dir):
     from persival.deploy.server import create_app
 
@@ -218,7 +235,7 @@ def test_health(client, export_dir):
     body = client.get("/health").json()
     meta = json.loads((export_dir / "metadata.json").read_text())
     assert body["status"] == "ok" and body["n_nodes"] == meta["n_nodes"]
-    assert body["tiers"] == ["float32", "float16", "int8"] and body["motion"] is True
+    assert body["tiers"] == ["float32", "float16", "int8"] and body["motion"] is False
 
 
 def test_predict_matches_onnxruntime(client, export_dir):
@@ -236,7 +253,20 @@ def test_predict_matches_onnxruntime(client, export_dir):
     assert body["activations"] == pytest.approx(a)
 
 
-def test_predict_from_angle_and_load(client):
+def test_predict_from_angle(client, small_run):
+    from persival.surrogate.activation_model import AngleActivationModel
+
+    lo, hi = client.get("/health").json()["angle_range_deg"]
+    body = client.post("/api/predict", json={"angle_deg": (lo + hi) / 2}).json()
+    model = AngleActivationModel.load(small_run / "inverse" / "activation_model.json")
+    np.testing.assert_allclose(body["activations"], model.predict([(lo + hi) / 2])[0], atol=1e-6)
+    refused = client.post("/api/predict", json={"angle_deg": (lo + hi) / 2, "load_kg": 1})
+    assert refused.status_code == 422 and "load_kg" in refused.json()["error"]
+
+
+def test_predict_from_angle_and_load(motion_client):
+    client = motion_client
+    assert client.get("/health").json()["motion"] is True
     lo, hi = client.get("/health").json()["angle_range_deg"]
     still = client.post("/api/predict", json={"angle_deg": (lo + hi) / 2}).json()
     loaded = client.post("/api/predict", json={"angle_deg": (lo + hi) / 2, "load_kg": 4}).json()

@@ -40,6 +40,9 @@ def hotspot_errors(predict, net_surfaces, sg, n: int = 500, seed: int = 7, muscl
 
 
 def _pyvista_panels(points, triangles, maps: dict[str, np.ndarray], path: Path, top: float) -> None:
+    from persival.evaluate.render import headless_vtk
+
+    headless_vtk()  # before pyvista: no "bad X server connection" on a machine without a display
     import pyvista as pv
 
     pv.OFF_SCREEN = True
