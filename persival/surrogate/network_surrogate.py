@@ -43,7 +43,9 @@ class NetworkSurrogate:
         self.metadata = {"kind": self.kind, "arch": self.config.arch, "net": self.net.config,
                          "training": {**summary, "dataset_sha256": dataset.digest(), "samples": len(dataset)},
                          "source": dataset.source, "muscles": list(dataset.surfaces.names),
-                         "parameters": int(sum(p.numel() for p in self.deployable().parameters()))}
+                         # weights of the deployed graph: the POD basis is a buffer there, but it is weights
+                         "parameters": int(sum(t.numel() for t in [*self.deployable().parameters(),
+                                                                    *self.deployable().buffers()]))}
         if out is not None:
             self.save(work)
         return self
