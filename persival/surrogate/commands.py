@@ -19,7 +19,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     def fit_sg(
         store: Path = typer.Option(..., "--store", help="Campaign store (zarr) with a sparse-grid design."),
         out: Path = typer.Option(Path("results/sg"), "--out", help="Output directory."),
-        muscle: str = typer.Option("biceps", "--muscle", help="Surface to interpolate."),
+        muscle: str = typer.Option("biceps", "--muscle", help="Surfaces to interpolate: a name, a comma-separated "
+                                   "list, or all."),
         degree: int = typer.Option(3, "--degree", help="Odd B-spline degree."),
     ) -> None:
         """Fit the B-spline sparse grid (surface positions + elbow angle) to a finished campaign."""
@@ -31,10 +32,12 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         console = Console()
         with user_errors(StoreError, out=out):
             check_output_dir(out)
-            surrogate = SurfaceSurrogate(muscle, degree).fit(store)
+            from persival.surrogate.stage import parse_muscles
+
+            surrogate = SurfaceSurrogate(parse_muscles(muscle), degree).fit(store)
             surrogate.save(out)
         meta = surrogate.metadata
-        console.print(f"fitted level-{meta['level']} grid ({meta['grid_points']} points) to {surrogate.n_nodes} {muscle} "
+        console.print(f"fitted level-{meta['level']} grid ({meta['grid_points']} points) to {surrogate.n_nodes} {surrogate.muscle} "
                       f"nodes + elbow angle; wrote {out}")
 
     @surrogate_app.command("adapt")
