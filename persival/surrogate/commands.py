@@ -37,8 +37,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             surrogate = SurfaceSurrogate(parse_muscles(muscle), degree).fit(store)
             surrogate.save(out)
         meta = surrogate.metadata
-        console.print(f"fitted level-{meta['level']} grid ({meta['grid_points']} points) to {surrogate.n_nodes} {surrogate.muscle} "
-                      f"nodes + elbow angle; wrote {out}")
+        console.print(f"fitted level-{meta['level']} grid ({meta['grid_points']} points) to {surrogate.n_nodes} "
+                      f"{surrogate.muscle} nodes + elbow angle; wrote {out}")
 
     @surrogate_app.command("adapt")
     def adapt(
