@@ -48,6 +48,7 @@ class RunConfig:
     paper_epochs: int = 8
     seed: int = 0
     fe_states: bool = True  # the three showcase FE equilibria
+    bench: bool = True  # the speed table in the evaluate stage
 
 
 #: (name, what it does, the stages whose artifacts it reads)
@@ -64,6 +65,10 @@ STAGES = [
     ("evaluate", "the paper's accuracy and speed tables", ["export", "campaign", "sg", "train", "data"]),
     ("report", "HTML report", ["evaluate", "fe", "model"]),
 ]
+
+
+#: stages whose folder is not named after them
+FOLDERS = {"train": "networks"}
 
 
 def _digest(obj) -> str:
@@ -89,7 +94,7 @@ def run(out: str | Path, config: RunConfig | None = None, console=None) -> dict:
     started = time.perf_counter()
     active = [s for s in STAGES if config.fe_states or s[0] != "fe"]
     for k, (name, what, _) in enumerate(active, 1):
-        folder = out / name
+        folder = out / FOLDERS.get(name, name)
         inputs = _stage_inputs(name, config, done)
         digest = _digest(inputs)
         marker = folder / "stage.json"

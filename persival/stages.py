@@ -221,7 +221,7 @@ def export(out: Path, config, console) -> dict:
 def evaluate(out: Path, config, console) -> dict:
     from persival.evaluate.stage import evaluate_run
 
-    result = evaluate_run(out, progress=True, console=console, n_states=config.held_out)
+    result = evaluate_run(out, progress=True, console=console, n_states=config.held_out, bench=config.bench)
     for name, why in result.get("skipped", {}).items():
         console.print(f"  [yellow]skipped[/yellow] {name}: {why}")
     return {"tables": sorted(result["tables"]), "figures": sorted(result["figures"]), "skipped": result.get("skipped", {})}
@@ -240,7 +240,7 @@ SETTINGS = {
     "campaign": ["profile", "simulator", "level", "held_out", "campaign_store", "held_out_store", "seed"],
     "sg": [], "inverse": [], "motion": ["moment_table", "profile"], "data": ["samples", "angle_fraction", "seed"],
     "train": ["pod_folds", "pod_epochs", "paper_folds", "paper_epochs", "seed"], "export": [],
-    "evaluate": ["seed"], "report": [],
+    "evaluate": ["seed", "bench"], "report": [],
 }
 RUNNERS = {"model": model, "fe": fe, "campaign": campaign, "sg": sg, "inverse": inverse, "motion": motion, "data": data,
            "train": train, "export": export, "evaluate": evaluate, "report": report}
