@@ -60,7 +60,7 @@ def plot_training_history(history: list[dict], path: str | Path, title: str = ""
         epoch = np.array([h["epoch"] for h in rows]) + f * epochs_per_fold
         mae = np.array([h["val_mae_mm"] for h in rows])
         for k, axis in enumerate("xyz"):
-            ax_mae.plot(epoch, mae[:, k], color=f"C{k}", lw=1.2, label=f"{axis} net" if f == folds[0] else None)
+            ax_mae.plot(epoch, mae[:, k], color=f"C{k}", lw=1.2, label=f"{axis} coordinate" if f == folds[0] else None)
         ax_loss.plot(epoch, [h["train_loss"] for h in rows], color="C3", lw=1, label="training" if f == folds[0] else None)
         ax_loss.plot(epoch, [h["val_loss"] for h in rows], color="C4", lw=1, label="validation" if f == folds[0] else None)
     for ax in (ax_mae, ax_loss):
