@@ -58,7 +58,7 @@ def test_stopping_rule_stops_after_patience_draws_without_growth():
 
 def test_prototype_parameter_counts_are_the_papers():
     """The width rule (first hidden layer at the input's width) reproduces the paper's counts exactly."""
-    from persival.surrogate.networks import PaperNet, _mlp, count_parameters
+    from persival.surrogate.networks import PaperNet, count_parameters, mlp
 
     counts = {s: dense_parameters([5, *prototype_widths(s, 5, 2809), 2809]) for s in SHAPES}
     assert counts["T-shaped"] == 17_154
@@ -67,7 +67,7 @@ def test_prototype_parameter_counts_are_the_papers():
     assert 3 * counts["exponential"] == count_parameters(PaperNet(2809)) == 25_326_738  # SPEC 6: 25.3 M
     for shape in SHAPES:  # the closed form counts what torch builds
         widths = prototype_widths(shape, 5, 60, n_mid=20)
-        assert dense_parameters([5, *widths, 60]) == count_parameters(_mlp([5, *widths, 60], "silu"))
+        assert dense_parameters([5, *widths, 60]) == count_parameters(mlp([5, *widths, 60], "silu"))
 
 
 def test_every_table_is_written_as_markdown_and_json(evaluated, tiny_run):

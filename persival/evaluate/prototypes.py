@@ -23,7 +23,7 @@ from torch import nn
 
 from persival.evaluate import paper_values
 from persival.evaluate.tables import make_table
-from persival.surrogate.networks import ACTIVATIONS, PaperNet, paper_widths
+from persival.surrogate.networks import PaperNet, mlp, paper_widths
 
 __all__ = ["SHAPES", "prototype_widths", "dense_parameters", "prototype_table"]
 
@@ -48,15 +48,6 @@ def dense_parameters(widths: list[int]) -> int:
     return int(sum(a * b + b for a, b in zip(widths[:-1], widths[1:])))
 
 
-def _mlp(widths: list[int], activation: str) -> nn.Sequential:
-    layers: list[nn.Module] = []
-    for k in range(len(widths) - 1):
-        layers.append(nn.Linear(widths[k], widths[k + 1]))
-        if k < len(widths) - 2:
-            layers.append(ACTIVATIONS[activation]())
-    return nn.Sequential(*layers)
-
-
 def _fit(net: nn.Module, x: torch.Tensor, y: torch.Tensor, epochs: int, batch: int, lr: float, seed: int,
          max_seconds: float) -> int:
     """Adam on the MSE; stops early once ``max_seconds`` are spent. Returns the epochs done."""
@@ -79,7 +70,7 @@ def _train_x_prototype(widths, alpha, ux, activation, epochs, batch, lr, seed, m
     """In-training MAE (mm) of the x displacement after a short training, and the epochs done."""
     torch.manual_seed(seed)
     scale = float(ux.std() + 1e-12)
-    net = _mlp([5, *widths, ux.shape[1]], activation)
+    net = mlp([5, *widths, ux.shape[1]], activation)
     x, y = torch.as_tensor(alpha, dtype=torch.float32), torch.as_tensor(ux / scale, dtype=torch.float32)
     done = _fit(net, x, y, epochs, batch, lr, seed, max_seconds)
     with torch.no_grad():

@@ -61,20 +61,9 @@ def _interpreter(content: bytes, threads: int):
 
 
 def _time(fn, reps: int, budget_s: float) -> dict:
-    import numpy as np
+    from persival.evaluate.timing import time_calls  # torch-free at import: safe beside TensorFlow
 
-    for _ in range(5):
-        fn()
-    t0 = time.perf_counter()
-    fn()
-    per_call = time.perf_counter() - t0
-    reps = reps if per_call * reps <= budget_s else max(50, int(budget_s / max(per_call, 1e-9)))
-    times = np.empty(reps)
-    for k in range(reps):
-        t = time.perf_counter()
-        fn()
-        times[k] = time.perf_counter() - t
-    return {"mean_s": float(times.mean()), "median_s": float(np.median(times)), "calls": int(reps)}
+    return time_calls(fn, reps, warmup=5, budget_s=budget_s)
 
 
 def run_peer(n_nodes: int = 2809, n_mid: int = 700, activation: str = "silu", reps: int = 1000,

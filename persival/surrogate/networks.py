@@ -19,7 +19,7 @@ import numpy as np
 import torch
 from torch import nn
 
-__all__ = ["ACTIVATIONS", "paper_widths", "PaperNet", "PodNet", "pod_basis", "count_parameters"]
+__all__ = ["ACTIVATIONS", "mlp", "paper_widths", "PaperNet", "PodNet", "pod_basis", "count_parameters"]
 
 PAPER_NODES, PAPER_MID = 2809, 700  # SPEC 6: the paper's output and middle widths
 ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "silu": nn.SiLU, "elu": nn.ELU}
@@ -37,7 +37,8 @@ def paper_widths(n_in: int, n_mid: int, n_out: int, n_hidden: int = 5) -> list[i
     return [round(a * math.exp(b * n / (n_hidden + 1)) + c) for n in range(1, n_hidden + 1)]
 
 
-def _mlp(widths: list[int], activation: str) -> nn.Sequential:
+def mlp(widths: list[int], activation: str) -> nn.Sequential:
+    """Dense layers of the given widths with the activation between them (none after the last)."""
     layers: list[nn.Module] = []
     for k in range(len(widths) - 1):
         layers.append(nn.Linear(widths[k], widths[k + 1]))
@@ -60,7 +61,7 @@ class PaperNet(nn.Module):
         self.config = {"arch": "paper", "n_nodes": n_nodes, "activation": activation, "n_mid": n_mid,
                        "n_hidden": n_hidden}
         self.widths = paper_widths(5, n_mid, n_nodes, n_hidden)
-        self.nets = nn.ModuleList([_mlp([5, *self.widths, n_nodes], activation) for _ in range(3)])
+        self.nets = nn.ModuleList([mlp([5, *self.widths, n_nodes], activation) for _ in range(3)])
         self.register_buffer("scale", torch.ones(()))  # displacement scale (mm) of the training set
 
     def forward(self, alpha: torch.Tensor) -> torch.Tensor:
@@ -131,7 +132,7 @@ class PodNet(nn.Module):
         super().__init__()
         self.config = {"arch": "pod", "n_nodes": n_nodes, "rank": rank, "hidden": list(hidden),
                        "activation": activation}
-        self.net = _mlp([5, *hidden, rank + 1], activation)
+        self.net = mlp([5, *hidden, rank + 1], activation)
         self.register_buffer("mean", torch.zeros(3 * n_nodes))
         self.register_buffer("basis", torch.zeros(rank, 3 * n_nodes))  # orthonormal rows
         self.register_buffer("coef_scale", torch.ones(rank))  # std of each coefficient
