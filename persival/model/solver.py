@@ -93,6 +93,16 @@ class QuasiStaticSolver:
     moment balance ``dPi/dtheta = f_h . dx_h/dtheta - M_ext(theta) = 0`` and Newton solves the
     symmetric bordered system by a Schur complement on the factorized ``K_ff`` (two right-hand
     sides, one factorization).
+
+    ``extra_terms``: further potential terms (contact with rigid obstacles, SPEC 3.3; see
+    :mod:`persival.model.contact`). Each has ``force_and_tangent(x) -> (f (n_dofs,), K)`` at the
+    current node positions ``x = X + u`` (n_nodes, 3): its gradient and its full symmetric
+    Hessian (sparse, n_dofs x n_dofs), added to the residual and the tangent. K's entries must
+    lie in the FE pattern (a node's own 3x3 block always does): they are added into the
+    assembled matrix in place, so the pattern, and the sparse solver's symbolic analysis, stay
+    fixed while a contact active set changes. An optional ``set_load_factor(t)`` is called
+    before each load step's Newton iterations. A term that depends on a free hinge's angle is
+    not linearized in it (prescribed angles and fixed obstacles are exact).
     """
 
     def __init__(
@@ -103,8 +113,10 @@ class QuasiStaticSolver:
         options: SolverOptions | None = None,
         quadrature_order: int = 2,
         assembler: Tet10Assembler | None = None,
+        extra_terms: list | None = None,
     ) -> None:
         self.mesh = mesh
+        self.extra_terms = list(extra_terms or [])
         self.material = material
         self.constraints = list(constraints)
         self.options = options or SolverOptions()
@@ -131,6 +143,7 @@ class QuasiStaticSolver:
         free_index = np.full(n, -1, dtype=np.int64)
         free_index[self.free] = np.arange(len(self.free))
         r, c = self.assembler.pattern_rows, self.assembler.pattern_cols
+        self._pattern_keys = r * n + c  # sorted (row-major): the position of each entry in K.data
         keep = (free_index[r] >= 0) & (free_index[c] >= 0)
         self._ff_take = np.flatnonzero(keep)
         rows_ff, cols_ff = free_index[r[keep]], free_index[c[keep]]
@@ -163,9 +176,45 @@ class QuasiStaticSolver:
             else:
                 u[c.dofs] = c.values(self.mesh.points, t)
 
+    def tangent(self, u: np.ndarray, activation: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
+        """Upper-triangle tangent (the assembler's fixed pattern) and residual force of the whole
+        potential: elasticity plus the extra terms."""
+        K, f = self.assembler.tangent(u, self.material, activation)
+        if self.extra_terms:
+            f = self._add_extra_terms(u, f, K)
+        return K, f
+
+    def internal_force(self, u: np.ndarray, activation: np.ndarray) -> np.ndarray:
+        """Residual force of the whole potential (elasticity plus the extra terms)."""
+        f = self.assembler.internal_force(u, self.material, activation)
+        return self._add_extra_terms(u, f) if self.extra_terms else f
+
+    def _add_extra_terms(self, u, f, K=None):
+        """f + sum of the terms' forces (e.g. SPEC 3.3 contact); their tangents' upper triangles are added into K.data."""
+        x = self.mesh.points + np.asarray(u, dtype=float).reshape(-1, 3)
+        n = self.assembler.n_dofs
+        for term in self.extra_terms:
+            f_term, K_term = term.force_and_tangent(x)
+            f = f + f_term
+            if K is None:
+                continue
+            C = sp.coo_matrix(K_term)
+            upper = C.row <= C.col
+            key = C.row[upper].astype(np.int64) * n + C.col[upper]
+            pos = np.minimum(np.searchsorted(self._pattern_keys, key), len(self._pattern_keys) - 1)
+            if not np.array_equal(self._pattern_keys[pos], key):
+                raise ValueError(f"extra term {type(term).__name__} couples DOFs outside the finite-element pattern")
+            np.add.at(K.data, pos, C.data[upper])
+        return f
+
+    def _set_load_factor(self, t: float) -> None:
+        for term in self.extra_terms:
+            if hasattr(term, "set_load_factor"):
+                term.set_load_factor(t)
+
     def _assemble(self, u, activation, stats):
         t0 = time.perf_counter()
-        K, f = self.assembler.tangent(u, self.material, activation)
+        K, f = self.tangent(u, activation)
         stats.time_assembly += time.perf_counter() - t0
         stats.n_assemblies += 1
         return K, f
@@ -202,7 +251,7 @@ class QuasiStaticSolver:
         if self.hinge is None:
             raise ValueError("this problem has no free hinge")
         self._moment_offset = 0.0
-        K, f = self.assembler.tangent(np.asarray(u, dtype=float).ravel(), self.material, activation)
+        K, f = self.tangent(np.asarray(u, dtype=float).ravel(), activation)
         r_theta, k_ft, k_tt = self._hinge_terms(np.asarray(u, dtype=float).ravel(), theta, K, f)
         self.linear_solver.factorize(self._free_upper(K))
         return r_theta, float(k_tt - k_ft @ self.linear_solver.solve(k_ft))
@@ -210,7 +259,8 @@ class QuasiStaticSolver:
     def condensed_stiffness(self, K: sp.csr_matrix, g: np.ndarray) -> float:
         """Stiffness along a motion ``g`` of the constrained DOFs with the free DOFs
         re-equilibrated: the Schur complement ``g.K.g - (K g)_f . K_ff^-1 (K g)_f``
-        (K: the upper-triangle tangent of :meth:`Tet10Assembler.tangent`)."""
+        (K: the upper-triangle tangent of :meth:`tangent`, or of :meth:`Tet10Assembler.tangent`
+        when there are no extra terms)."""
         Kg = symmetric_matvec(K, g)
         self.linear_solver.factorize(self._free_upper(K))
         k_f = Kg[self.free]
@@ -231,6 +281,7 @@ class QuasiStaticSolver:
         first element layer.
         """
         opts = self.options
+        self._set_load_factor(t)
         # residual homotopy: the initial state's moment imbalance is released along t
         self._moment_offset = (1.0 - t) * self._initial_moment_residual
 
@@ -362,7 +413,8 @@ class QuasiStaticSolver:
             u0 = u.copy()
             self._apply_constraints(u0, 0.0, theta)
             try:
-                f0 = self.assembler.internal_force(u0, self.material, start)
+                self._set_load_factor(0.0)
+                f0 = self.internal_force(u0, start)
                 self._initial_moment_residual = self._hinge_terms(u0, theta, f=f0)[0]
             except InvertedElementError:
                 pass
@@ -394,7 +446,7 @@ class QuasiStaticSolver:
                 dt = min(1.5 * dt, 1.0)
         stats.wall_time = time.perf_counter() - wall
         if f is None:  # nothing to do: report the reactions of the initial state
-            f = self.assembler.internal_force(u, self.material, np.broadcast_to(target, (m,)).copy())
+            f = self.internal_force(u, np.broadcast_to(target, (m,)).copy())
         self._moment_offset = 0.0
         r_theta = self._hinge_terms(u, theta, f=f)[0] if self.hinge is not None else 0.0
         return StaticSolution(

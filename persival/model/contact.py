@@ -1,0 +1,286 @@
+"""Muscle-bone contact: rigid analytic obstacles, frictionless normal penalty contact (SPEC 3.3).
+
+A bone is a rigid obstacle described by its surface's closest-point projection: a capsule
+(a segment with a radius: the model file's ``[[bones]]`` entries) or a half-space (verification).
+For a body point at current position x it gives the penetration depth
+``g(x) = r - dist(x, axis segment)`` (capsule), the outward unit normal n at the closest
+surface point and the normal's gradient ``dn/dx``. Contact adds the penalty energy
+
+    Pi_c = sum_p 0.5 eps w_p <g_p>^2,    <g> = max(0, g)        (SPEC 3.3 contact)
+
+over contact points p of the body's surface, each with an area weight w_p: the surface nodes
+with their tributary areas (:func:`surface_node_weights`), or the quadrature points of the
+6-node boundary faces. eps (N/mm^3) turns a penetration into a contact pressure ``p = eps g``.
+With ``dg/dx = -n``:
+
+    force     f_p = dPi_c/dx_p = -eps w_p g_p n_p                (residual contribution)
+    tangent   K_p = df_p/dx_p  = eps w_p (n n^T - g dn/dx)
+
+and for a capsule ``dn/dx = (I - n n^T - t t^T) / d`` where the closest point lies inside the
+segment (t: unit axis; the point slides along the axis), ``(I - n n^T) / d`` on the spherical
+caps (the closest point is a fixed end), d = r - g the distance to the axis. The curvature term
+``-eps w g dn/dx`` (the normal turns as the point slides over the curved surface) makes the
+tangent the exact Hessian of Pi_c, so Newton stays quadratic once the active set (the points
+with g > 0) settles. The tangent couples only nodes of one boundary face (one 3x3 block per
+node for nodal contact points): entries that the FE pattern already has, so the sparse
+factorization keeps its one symbolic analysis while the active set changes (see
+QuasiStaticSolver's ``extra_terms``). Frictionless and rigid: bones do not deform, and muscles
+do not touch each other.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from persival.model.mesh import Tet10Mesh
+
+# the four 3-node sub-triangles of a 6-node face (corners 0-2, mid-sides 3 = (0,1), 4 = (1,2), 5 = (2,0))
+_SUB_TRIANGLES = np.array([[0, 3, 5], [1, 4, 3], [2, 5, 4], [3, 4, 5]])
+
+
+def _as_vector(v) -> np.ndarray:
+    v = np.asarray(v, dtype=float).reshape(3)
+    if not np.all(np.isfinite(v)):
+        raise ValueError("obstacle coordinates must be finite")
+    return v
+
+
+@dataclass(frozen=True)
+class Capsule:
+    """All points within ``radius`` of the segment start-end (a bone's shaft with rounded ends)."""
+
+    start: np.ndarray
+    end: np.ndarray
+    radius: float
+    name: str = "capsule"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "start", _as_vector(self.start))
+        object.__setattr__(self, "end", _as_vector(self.end))
+        if not self.radius > 0:
+            raise ValueError(f"obstacle {self.name!r}: radius must be positive")
+
+    @classmethod
+    def from_bone(cls, bone) -> Capsule:
+        """From a model-file bone entry (anything with start, end, radius and name)."""
+        return cls(bone.start, bone.end, float(bone.radius), bone.name)
+
+    def project(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, Callable[[np.ndarray], np.ndarray]]:
+        """Penetration g (n,), outward normal n (n, 3) and ``dn_dx(mask) -> (k, 3, 3)`` (SPEC 3.3 contact)."""
+        axis = self.end - self.start
+        length = float(np.linalg.norm(axis))
+        t = axis / length if length > 0 else np.zeros(3)
+        s = (x - self.start) @ t
+        inside = (s > 0.0) & (s < length)  # closest point slides along the axis (else: a fixed end)
+        v = x - (self.start + np.clip(s, 0.0, length)[:, None] * t)
+        d = np.linalg.norm(v, axis=1)
+        # a node exactly on the axis has no normal: it gets none (zero force), a degenerate case
+        d_safe = np.where(d > 0.0, d, np.inf)
+        n = v / d_safe[:, None]
+
+        def dn_dx(mask: np.ndarray) -> np.ndarray:
+            nm = n[mask]
+            P = np.eye(3) - nm[:, :, None] * nm[:, None, :]
+            P -= inside[mask][:, None, None] * np.outer(t, t)[None]
+            return P / d_safe[mask][:, None, None]
+
+        return self.radius - d, n, dn_dx
+
+    def transformed(self, rotation: np.ndarray, centre) -> Capsule:
+        """The capsule moved rigidly: p -> centre + rotation (p - centre)."""
+        c, R = _as_vector(centre), np.asarray(rotation, dtype=float)
+        return Capsule(c + R @ (self.start - c), c + R @ (self.end - c), self.radius, self.name)
+
+    def rotated(self, axis, centre, theta_deg: float) -> Capsule:
+        """Turned by theta about an axis through centre (a forearm bone at elbow angle theta)."""
+        from persival.model.arm import rotation_about  # lazily: arm builds on this module's users
+
+        return self.transformed(rotation_about(axis, theta_deg), centre)
+
+
+@dataclass(frozen=True)
+class HalfSpace:
+    """The rigid half-space behind the plane through ``point`` with outward unit ``normal``."""
+
+    point: np.ndarray
+    normal: np.ndarray
+    name: str = "half-space"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "point", _as_vector(self.point))
+        n = _as_vector(self.normal)
+        if np.linalg.norm(n) == 0:
+            raise ValueError(f"obstacle {self.name!r}: normal must be non-zero")
+        object.__setattr__(self, "normal", n / np.linalg.norm(n))
+
+    def project(self, x: np.ndarray):
+        """As :meth:`Capsule.project`; a plane's normal does not turn (dn/dx = 0)."""
+        g = (self.point - x) @ self.normal
+        return g, np.broadcast_to(self.normal, x.shape), lambda mask: np.zeros((int(np.count_nonzero(mask)), 3, 3))
+
+    def transformed(self, rotation: np.ndarray, centre) -> HalfSpace:
+        c, R = _as_vector(centre), np.asarray(rotation, dtype=float)
+        return HalfSpace(c + R @ (self.point - c), R @ self.normal, self.name)
+
+    def rotated(self, axis, centre, theta_deg: float) -> HalfSpace:
+        from persival.model.arm import rotation_about
+
+        return self.transformed(rotation_about(axis, theta_deg), centre)
+
+
+def bone_obstacles(bones, centre, axis, theta_deg: float) -> list[Capsule]:
+    """Capsules of model-file bones at elbow angle theta: ``forearm`` bones (given at theta = 0)
+    turn about the hinge, ``upper_arm`` bones stay (SPEC 3.3)."""
+    out = []
+    for bone in bones:
+        capsule = Capsule.from_bone(bone)
+        out.append(capsule.rotated(axis, centre, theta_deg) if bone.segment == "forearm" else capsule)
+    return out
+
+
+def surface_node_weights(mesh: Tet10Mesh, points: np.ndarray | None = None,
+                         faces: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Surface nodes (sorted) and their tributary areas (mm^2) from the 6-node boundary faces.
+
+    Each face is split into its four 3-node sub-triangles, each giving a third of its area to
+    its nodes: on a flat face a corner gets A/12 and a mid-side node A/4, all positive (the
+    consistent weights of the quadratic triangle, 0 and A/3, would leave the corners out of
+    contact). The weights sum to the surface area of the sub-triangulation.
+    """
+    faces = mesh.boundary_faces() if faces is None else np.asarray(faces, dtype=np.int64)
+    X = mesh.points if points is None else np.asarray(points, dtype=float)
+    tri = faces[:, _SUB_TRIANGLES]  # (k, 4, 3)
+    P = X[tri]
+    area = 0.5 * np.linalg.norm(np.cross(P[:, :, 1] - P[:, :, 0], P[:, :, 2] - P[:, :, 0]), axis=2)
+    w = np.bincount(tri.ravel(), weights=np.repeat(area.ravel() / 3.0, 3), minlength=len(X))
+    nodes = np.unique(faces)
+    return nodes, w[nodes]
+
+
+def _triangle6_rule() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Shape functions N (6, 6) and their (xi, eta) derivatives (6, 2, 6) of the 6-node triangle
+    at the 6-point Dunavant rule (degree 4, positive weights), and the weights (sum 1/2)."""
+    a, b = 0.445948490915965, 0.091576213509771
+    L = np.array([[a, a, 1 - 2 * a], [a, 1 - 2 * a, a], [1 - 2 * a, a, a],
+                  [b, b, 1 - 2 * b], [b, 1 - 2 * b, b], [1 - 2 * b, b, b]])
+    w = 0.5 * np.repeat([0.223381589678011, 0.109951743655322], 3)
+    edges = np.array([[0, 1], [1, 2], [2, 0]])
+    N = np.hstack([L * (2 * L - 1), 4 * L[:, edges[:, 0]] * L[:, edges[:, 1]]])
+    dL = np.array([[-1.0, 1.0, 0.0], [-1.0, 0.0, 1.0]])  # d(L0, L1, L2)/d(xi, eta)
+    dcorner = (4 * L - 1)[:, None, :] * dL[None]
+    dedge = 4 * (dL[None, :, edges[:, 0]] * L[:, None, edges[:, 1]] + L[:, None, edges[:, 0]] * dL[None, :, edges[:, 1]])
+    return N, np.concatenate([dcorner, dedge], axis=2), w
+
+
+class ObstacleContact:
+    """Penalty contact of body points with rigid obstacles: an extra term of QuasiStaticSolver.
+
+    The contact points are fixed combinations of nodes, ``x_p = sum_a N_pa x_a`` (a sparse
+    ``interpolation`` matrix, n_points x n_nodes), each with an area weight w_p: the surface
+    nodes themselves with their tributary areas (:meth:`at_nodes`), or the quadrature points of
+    the 6-node boundary faces (:meth:`on_faces`: consistent with the traction field, it passes the
+    contact patch test exactly). Energy, force and tangent as in the module docstring, mapped
+    to the nodes by N: ``f = N^T f_p``, ``K = N^T K_p N`` (couplings within a face: in the FE
+    pattern). ``pose(t)``, if given, returns the obstacles at load factor t (the solver calls
+    :meth:`set_load_factor`): obstacles moving along the continuation, e.g. with the joint angle.
+    """
+
+    def __init__(self, interpolation, weights, obstacles: Sequence, penalty: float,
+                 pose: Callable[[float], Sequence] | None = None) -> None:
+        self.interpolation = sp.csr_matrix(interpolation)
+        self.weights = np.broadcast_to(np.asarray(weights, dtype=float), (self.interpolation.shape[0],)).copy()
+        if np.any(self.weights < 0) or not penalty > 0:
+            raise ValueError("contact weights must be non-negative and the penalty positive")
+        self.penalty = float(penalty)
+        self.pose = pose
+        self.obstacles = tuple(obstacles if pose is None else pose(0.0))
+
+    @classmethod
+    def at_nodes(cls, mesh: Tet10Mesh, obstacles: Sequence, penalty: float, faces=None, exclude=(),
+                 pose=None) -> ObstacleContact:
+        """Every node of the boundary faces (or of ``faces``) except ``exclude`` (e.g. tied end
+        faces), with its tributary area on those faces."""
+        nodes, w = surface_node_weights(mesh, faces=faces)
+        keep = ~np.isin(nodes, np.asarray(exclude, dtype=np.int64))
+        nodes, w = nodes[keep], w[keep]
+        N = sp.csr_matrix((np.ones(len(nodes)), (np.arange(len(nodes)), nodes)), shape=(len(nodes), mesh.n_nodes))
+        return cls(N, w, obstacles, penalty, pose)
+
+    @classmethod
+    def on_faces(cls, mesh: Tet10Mesh, obstacles: Sequence, penalty: float, faces=None, exclude=(),
+                 pose=None) -> ObstacleContact:
+        """The 6 quadrature points of every boundary face (or of ``faces``, (k, 6)) that has no
+        node in ``exclude``; weights: the reference area element times the rule's weight."""
+        faces = mesh.boundary_faces() if faces is None else np.asarray(faces, dtype=np.int64)
+        faces = faces[~np.isin(faces, np.asarray(exclude, dtype=np.int64)).any(axis=1)]
+        N, dN, w = _triangle6_rule()
+        tangents = np.einsum("qdj,kji->kqdi", dN, mesh.points[faces])  # (k, 6 points, 2, 3)
+        area = np.linalg.norm(np.cross(tangents[:, :, 0], tangents[:, :, 1]), axis=2) * w  # (k, 6)
+        rows = np.repeat(np.arange(6 * len(faces)), 6)
+        cols = np.repeat(faces, 6, axis=0).ravel()
+        interp = sp.csr_matrix((np.tile(N.ravel(), len(faces)), (rows, cols)), shape=(6 * len(faces), mesh.n_nodes))
+        return cls(interp, area.ravel(), obstacles, penalty, pose)
+
+    def set_load_factor(self, t: float) -> None:
+        if self.pose is not None:
+            self.obstacles = tuple(self.pose(t))
+
+    def points(self, x: np.ndarray) -> np.ndarray:
+        """Contact point positions (n_points, 3) for node positions x (n_nodes, 3)."""
+        return self.interpolation @ np.asarray(x, dtype=float).reshape(-1, 3)
+
+    def _pairs(self, x: np.ndarray):
+        """Per obstacle: (obstacle, active mask over the points, g, n, dn_dx) at node positions x."""
+        xp = self.points(x)
+        for obstacle in self.obstacles:
+            g, n, dn_dx = obstacle.project(xp)
+            yield obstacle, g > 0.0, g, n, dn_dx
+
+    def energy(self, x: np.ndarray) -> float:
+        """Pi_c = sum_p 0.5 eps w_p <g_p>^2 (N mm; SPEC 3.3 contact)."""
+        return sum(0.5 * self.penalty * float(self.weights[a] @ g[a] ** 2) for _, a, g, _, _ in self._pairs(x))
+
+    def force_and_tangent(self, x: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix]:
+        """Residual contribution dPi_c/dx (n_dofs,) and its full symmetric Hessian (n_dofs x n_dofs):
+        per active point f_p = -eps w g n, K_p = eps w (n n^T - g dn/dx) (SPEC 3.3 contact)."""
+        n_points = self.interpolation.shape[0]
+        f_p = np.zeros((n_points, 3))
+        rows, blocks = [], []
+        for _, a, g, n, dn_dx in self._pairs(x):
+            ew, ga, na = self.penalty * self.weights[a], g[a], n[a]
+            f_p[a] -= (ew * ga)[:, None] * na
+            blocks.append(ew[:, None, None] * (na[:, :, None] * na[:, None, :] - ga[:, None, None] * dn_dx(a)))
+            rows.append(np.flatnonzero(a))
+        active = np.concatenate(rows) if rows else np.zeros(0, dtype=np.int64)
+        dofs = 3 * np.arange(len(active))[:, None] + np.arange(3)
+        K_p = sp.csr_matrix(
+            (np.concatenate(blocks).ravel() if blocks else np.zeros(0),
+             (np.repeat(dofs, 3, axis=1).ravel(), np.tile(dofs, (1, 3)).ravel())),
+            shape=(3 * len(active), 3 * len(active)),
+        )
+        G = sp.kron(self.interpolation[active], sp.identity(3), format="csr")  # dx_p/du
+        return (self.interpolation.T @ f_p).ravel(), (G.T @ K_p @ G).tocsr()
+
+    def penetration(self, x: np.ndarray) -> np.ndarray:
+        """Largest penetration (mm, >= 0) of each contact point into any obstacle."""
+        depth = np.zeros(self.interpolation.shape[0])
+        for _, _, g, _, _ in self._pairs(x):
+            depth = np.maximum(depth, g)
+        return depth
+
+    def obstacle_loads(self, x: np.ndarray, centre) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Per obstacle: total force (N) and moment (N mm, about ``centre``) that the body exerts on it.
+
+        The body pushes an obstacle with ``-eps w g n`` per point (SPEC 3.3 contact): a bone on
+        the forearm passes this moment on to the elbow's balance.
+        """
+        xp, c, out = self.points(x), _as_vector(centre), {}
+        for obstacle, a, g, n, _ in self._pairs(x):
+            push = -(self.penalty * self.weights[a] * g[a])[:, None] * n[a]
+            force, moment = out.get(obstacle.name, (np.zeros(3), np.zeros(3)))
+            out[obstacle.name] = (force + push.sum(axis=0), moment + np.cross(xp[a] - c, push).sum(axis=0))
+        return out
