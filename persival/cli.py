@@ -34,14 +34,14 @@ def _register() -> None:
     # Imported here so that `persival --help` stays fast and each stage stays independent.
     from persival import run_command
     from persival.campaign import commands as campaign_commands
+    from persival.campaign import fe_commands
     from persival.deploy import commands as deploy_commands
     from persival.evaluate import commands as evaluate_commands
-    from persival.model import commands as model_commands
     from persival.surrogate import commands as surrogate_commands
 
     run_command.register(app)
-    model_commands.register(app, bench_app)
     campaign_commands.register(app, bench_app)
+    fe_commands.register(app)
     surrogate_commands.register(app, bench_app)
     evaluate_commands.register(app, bench_app)
     deploy_commands.register(app, bench_app)

@@ -1,16 +1,17 @@
 """`persival run`: the end-to-end job, one stage after the other, each reading the last one's artifact.
 
     1 model     OUT/model/     geometry.json, mesh_*.vtu, bone_*.vtu (built-in arm, chosen profile)
-    2 fe        OUT/fe/        three FE equilibria of the arm (state.json + VTU) and arm.png
-    3 campaign  OUT/campaign/  campaign.zarr (sparse-grid design) + held_out.zarr (random states)
-    4 sg        OUT/sg/        B-spline SG of all five muscles' surfaces + the elbow angle
-    5 inverse   OUT/inverse/   activation_model.json (Theta -> alpha_opt) + plot
-    6 motion    OUT/motion/    (angle, velocity, acceleration, load) -> alpha, from an FE moment table
-    7 data      OUT/data/      SG training data (alpha_opt(Theta) and random alpha)
-    8 train     OUT/networks/  pod/ (all muscles) and paper/ (the paper's net, biceps)
-    9 export    OUT/export/    ONNX models + metadata.json (SPEC 9)
-   10 evaluate  OUT/evaluate/  the paper's tables and figures
-   11 report    OUT/report/    index.html + results.json
+    2 tables    OUT/tables/    the FE arm's per-muscle response tables (kept in the state cache) + moments.npz
+    3 fe        OUT/fe/        three FE equilibria of the arm (state.json + VTU) and arm.png
+    4 campaign  OUT/campaign/  campaign.zarr (sparse-grid design) + held_out.zarr (random states)
+    5 sg        OUT/sg/        B-spline SG of all five muscles' surfaces + the elbow angle
+    6 inverse   OUT/inverse/   activation_model.json (Theta -> alpha_opt) + plot
+    7 motion    OUT/motion/    (angle, velocity, acceleration, load) -> alpha, from the FE moments
+    8 data      OUT/data/      SG training data (alpha_opt(Theta) and random alpha)
+    9 train     OUT/networks/  pod/ (all muscles) and paper/ (the paper's net, biceps)
+   10 export    OUT/export/    ONNX models + metadata.json (SPEC 9)
+   11 evaluate  OUT/evaluate/  the paper's tables and figures
+   12 report    OUT/report/    index.html + results.json
 
 Resumable stage by stage: every stage leaves ``OUT/<stage>/stage.json`` with the digest of its
 inputs (its own settings plus the digests of the stages it reads); a stage whose digest is
@@ -34,12 +35,12 @@ __all__ = ["RunConfig", "run", "STAGES"]
 @dataclass
 class RunConfig:
     profile: str = "quick"
-    simulator: str = "analytic"  # "arm": the campaign on the FE arm (about an hour on 2 cores)
+    simulator: str = "arm"  # the FE arm from its response tables; "analytic": the closed-form stand-in (tests)
     level: int = 1  # sparse-grid level of the campaign (1: 243 states, 2: 1053)
     held_out: int = 25  # random states of the same simulator for the error-propagation table
     campaign_store: str | None = None  # reuse a finished campaign instead of running one
     held_out_store: str | None = None
-    moment_table: str | None = None  # FE moment table of the same arm (persival moments): the motion model
+    moment_table: str | None = None  # FE moment table of the same arm; default: the tables stage's
     samples: int = 4000  # SG training states
     angle_fraction: float = 0.5
     pod_folds: int = 5
@@ -54,11 +55,12 @@ class RunConfig:
 #: (name, what it does, the stages whose artifacts it reads)
 STAGES = [
     ("model", "validate and mesh the built-in arm", []),
-    ("fe", "three FE equilibria of the arm (hanging, biceps 0.5, flexors 1)", ["model"]),
-    ("campaign", "sparse-grid campaign + random held-out states", []),
+    ("tables", "the FE arm's per-muscle response tables (built once per model)", []),
+    ("fe", "three FE equilibria of the arm (hanging, biceps 0.5, flexors 1)", ["model", "tables"]),
+    ("campaign", "sparse-grid campaign + random held-out states", ["tables"]),
     ("sg", "B-spline sparse grid of five muscle surfaces + elbow angle", ["campaign"]),
     ("inverse", "least-effort activations: the angle activation model", ["sg"]),
-    ("motion", "motion-and-load activation model from the FE moment table", ["sg"]),
+    ("motion", "motion-and-load activation model from the FE moments", ["sg", "tables"]),
     ("data", "SG training data at alpha_opt(Theta) and random alpha", ["sg", "inverse"]),
     ("train", "POD network (five muscles) and the paper's network (biceps)", ["data"]),
     ("export", "ONNX models + metadata.json", ["train", "inverse", "motion"]),

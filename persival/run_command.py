@@ -18,13 +18,13 @@ def register(app: typer.Typer) -> None:
         profile: str = typer.Option(
             "quick", "--profile", help=profiles_help("Mesh profile of the built-in arm", model_option=False)),
         simulator: str = typer.Option(
-            "analytic", "--simulator", help="Campaign simulator: analytic (closed-form stand-in, seconds) or arm "
-            "(the FE arm: about an hour for level 1 on 2 cores)."),
+            "arm", "--simulator", help="Campaign simulator: arm (the FE arm, from its response tables, built once "
+            "per model) or analytic (closed-form stand-in for tests, seconds)."),
         level: int = typer.Option(1, "--level", min=1, max=3, help="Sparse-grid level of the campaign (1: 243, 2: 1053)."),
         campaign_store: Path = typer.Option(None, "--campaign-store", help="Reuse a finished sparse-grid campaign store."),
         held_out_store: Path = typer.Option(None, "--held-out-store", help="Reuse a finished held-out campaign store."),
-        moment_table: Path = typer.Option(None, "--moment-table", help="FE moment table of the same arm (persival "
-                                          "moments): adds the motion-and-load activation model."),
+        moment_table: Path = typer.Option(None, "--moment-table", help="FE moment table of the same arm (default: "
+                                          "the tables stage's; needed with --simulator analytic for the motion model)."),
         held_out: int = typer.Option(25, "--held-out", min=1, help="Random held-out states of the campaign's simulator."),
         samples: int = typer.Option(4000, "--samples", min=10, help="SG training states for the networks."),
         pod_epochs: int = typer.Option(100, "--pod-epochs", min=1, help="POD network: epochs per fold (5 folds)."),

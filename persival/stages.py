@@ -53,15 +53,47 @@ ARM_STATES = {"hanging": (0.0, 0.0, 0.0, 0.0, 0.0), "biceps_half": (0.5, 0.0, 0.
               "flexors_full": (1.0, 1.0, 1.0, 0.0, 0.0)}
 
 
+def tables(out: Path, config, console) -> dict:
+    """The FE arm's per-muscle response tables (SPEC 8): built once per model and mesh in the
+    state cache, reused by every later run; their moments go to OUT/tables/moments.npz."""
+    if config.simulator != "arm":
+        why = "the campaign runs the analytic stand-in"
+        console.print(f"  [yellow]skipped[/yellow]: {why}")
+        return {"skipped": why}
+    from persival.campaign.arm_simulator import ensure_tables
+
+    t0 = time.perf_counter()
+    with console.status("FE arm: meshing, the hanging arm, response table columns (dask)") as status:
+        table = ensure_tables(None, config.profile, None,
+                              lambda done, total: status.update(f"FE arm: response table columns {done}/{total}"))
+    moments = table.moment_table()
+    moments.save(out / "tables" / "moments.npz")
+    lo, hi = moments.finite_range_deg()
+    failed = int(np.isnan(moments.tension).sum())
+    console.print(f"  {table.root}: {len(table.angles_deg)} angles x {len(table.levels)} levels x 5 muscles, "
+                  f"{failed} failed solves, converged over {lo:g}-{hi:g} deg; {table.build_seconds():.0f} s of "
+                  f"column compute (once per model), {time.perf_counter() - t0:.0f} s this run")
+    return {"root": str(table.root), "angles_deg": table.angles_deg.tolist(), "levels": table.levels.tolist(),
+            "failed_solves": failed, "range_deg": [lo, hi], "column_compute_s": table.build_seconds(),
+            "moments": str(out / "tables" / "moments.npz")}
+
+
 def fe(out: Path, config, console) -> dict:
-    """Three FE states, each continued from the hanging arm (from biceps 0.5 the jump to all
-    flexors at 1 is a snap-through of the slack brachioradialis: docs/arm_model.md)."""
+    """Three FE states of the arm: from the response tables (exact path) when the run has them,
+    else each continued from the hanging arm (from biceps 0.5 the jump to all flexors at 1 is a
+    snap-through of the slack brachioradialis: docs/arm_model.md)."""
     from persival.evaluate.render import render_states
     from persival.model.arm import ArmModel
     from persival.model.output import write_state
     from persival.model.progress import ConsoleProgress
 
     arm = ArmModel(profile=config.profile)
+    solver = None
+    if config.simulator == "arm":
+        from persival.campaign.arm_simulator import open_tables
+        from persival.campaign.table_solve import TableSolver
+
+        solver = TableSolver(arm, open_tables(arm))
     rows, directories = {}, []
     with console.status("FE: the hanging arm (rest state, all activations 0)") as status, \
             ConsoleProgress(console, status, "FE: the hanging arm") as report:
@@ -69,7 +101,12 @@ def fe(out: Path, config, console) -> dict:
     for name, activations in ARM_STATES.items():
         with console.status(f"FE: {name} {list(activations)} (joint equilibrium, Newton)") as status, \
                 ConsoleProgress(console, status, f"FE: {name}") as report:
-            state = hanging if not any(activations) else arm.solve(activations, warm_start=hanging, progress=report)
+            if not any(activations):
+                state = hanging
+            elif solver is not None:
+                state = solver.solve(activations, near_deg=hanging.elbow_angle_deg, progress=report)
+            else:
+                state = arm.solve(activations, warm_start=hanging, progress=report)
         directories.append(write_state(arm, state, out / "fe" / name))
         rows[name] = {"activations": list(activations), "elbow_angle_deg": state.elbow_angle_deg,
                       "moment_residual_Nmm": state.moment_residual, "newton_iterations": state.statistics["iterations"],
@@ -91,7 +128,7 @@ def campaign(out: Path, config, console) -> dict:
     from persival.campaign.store import CampaignStore
 
     folder = out / "campaign"
-    options = {"profile": config.profile} if config.simulator == "arm" else {}
+    options = {"profile": config.profile, "method": "tables"} if config.simulator == "arm" else {}
     spec = SimulatorSpec(config.simulator, options)
     stores = {}
     for name, given, design in (("campaign", config.campaign_store, Design.sparse_grid(config.level)),
@@ -142,13 +179,13 @@ def motion(out: Path, config, console) -> dict:
     from persival.surrogate.base import load_surrogate
     from persival.surrogate.motion_model import MotionActivationModel, plot_motion_model
 
-    if config.moment_table is None:
-        why = ("the analytic stand-in has no muscle moments" if config.simulator != "arm" else
-               "no --moment-table given (build one: persival moments --profile PROFILE --out FILE)")
+    path = config.moment_table or (out / "tables" / "moments.npz" if config.simulator == "arm" else None)
+    if path is None:
+        why = "the analytic stand-in has no muscle moments"
         console.print(f"  [yellow]skipped[/yellow]: {why}; the export has no activation_motion model")
         return {"skipped": why}
     sg = load_surrogate(out / "sg")
-    table = MomentTable.load(config.moment_table, model_hash=sg.metadata.get("model_hash"), profile=config.profile)
+    table = MomentTable.load(path, model_hash=sg.metadata.get("model_hash"), profile=config.profile)
     model = MotionActivationModel.build(table)
     model.save(out / "motion")
     plot_motion_model(model, out / "motion" / "motion_model.png")
@@ -156,7 +193,7 @@ def motion(out: Path, config, console) -> dict:
     console.print(f"  range {model.range_deg[0]:.0f}-{model.range_deg[1]:.0f} deg; holdable load at 30/60/90/120 deg: "
                   + " / ".join(f"{h:.2f}" for h in holdable) + " kg")
     return {"range_deg": list(model.range_deg), "holdable_load_kg_30_60_90_120": holdable.tolist(),
-            "table": config.moment_table}
+            "table": str(path)}
 
 
 def data(out: Path, config, console) -> dict:
@@ -236,13 +273,14 @@ def report(out: Path, config, console) -> dict:
 
 
 SETTINGS = {
-    "model": ["profile"], "fe": ["profile"],
+    "model": ["profile"], "tables": ["profile", "simulator"], "fe": ["profile", "simulator"],
     "campaign": ["profile", "simulator", "level", "held_out", "campaign_store", "held_out_store", "seed"],
     "sg": [], "inverse": [], "motion": ["moment_table", "profile"], "data": ["samples", "angle_fraction", "seed"],
     "train": ["pod_folds", "pod_epochs", "paper_folds", "paper_epochs", "seed"], "export": [],
     "evaluate": ["seed", "bench"], "report": [],
 }
-RUNNERS = {"model": model, "fe": fe, "campaign": campaign, "sg": sg, "inverse": inverse, "motion": motion, "data": data,
+RUNNERS = {"model": model, "tables": tables,
+           "fe": fe, "campaign": campaign, "sg": sg, "inverse": inverse, "motion": motion, "data": data,
            "train": train, "export": export, "evaluate": evaluate, "report": report}
 
 

@@ -16,6 +16,17 @@ from pathlib import Path
 import pytest
 
 
+def pytest_configure(config):
+    """The on-disk state cache (persival.model.state_cache) of a test run is a fresh folder of
+    that run, shared by its xdist workers (they inherit the variable; entries are keyed by model
+    and mesh and written atomically), never the user's ~/.cache."""
+    if not os.environ.get("PERSIVAL_TEST_CACHE_SET"):
+        import tempfile
+
+        os.environ["PERSIVAL_CACHE"] = tempfile.mkdtemp(prefix="persival-test-cache-")
+        os.environ["PERSIVAL_TEST_CACHE_SET"] = "1"
+
+
 def _build_small_run(root: Path) -> Path:
     from persival.campaign.design import Design
     from persival.campaign.runner import INLINE, run_campaign

@@ -65,16 +65,17 @@ def test_symmetry_and_objectivity():
     assert np.abs(S_rigid).max() < 1e-13
 
 
+@pytest.mark.parametrize("prestretch", [1.0, 1.27])  # SPEC 3.3 fibre reference lambda_0
 @pytest.mark.parametrize("fibre_stretch", [0.9, 1.2, 1.5])  # below 1, between 1 and lambda_opt, above lambda_opt
 @pytest.mark.parametrize("muscle_fraction", [1.0, 0.0, 0.5])
-def test_consistent_tangent_matches_finite_differences(fibre_stretch, muscle_fraction):
+def test_consistent_tangent_matches_finite_differences(fibre_stretch, muscle_fraction, prestretch):
     rng = np.random.default_rng(int(fibre_stretch * 10) + int(muscle_fraction * 100))
     n = 40
     F, a0 = stretched_along_fibre(rng, n, fibre_stretch)
     act = rng.uniform(0.0, 1.0, n)
     lam = np.sqrt(np.einsum("ni,nji,njk,nk->n", a0, F, F, a0))
     assert np.allclose(lam, fibre_stretch)
-    S, CC = stress_and_tangent(F, a0, act, muscle_fraction, K_BULK)
+    S, CC = stress_and_tangent(F, a0, act, muscle_fraction, K_BULK, fibre_prestretch=prestretch)
     assert np.abs(CC - CC.transpose(0, 3, 4, 1, 2)).max() <= 1e-12 * np.abs(CC).max()  # major symmetry
     assert np.abs(CC - CC.transpose(0, 2, 1, 3, 4)).max() <= 1e-12 * np.abs(CC).max()  # minor symmetry
     h = 1e-6
@@ -82,14 +83,33 @@ def test_consistent_tangent_matches_finite_differences(fibre_stretch, muscle_fra
     for _ in range(4):
         dF = rng.standard_normal((n, 3, 3))
         fd = (
-            second_piola_kirchhoff(F + h * dF, a0, act, muscle_fraction, K_BULK)
-            - second_piola_kirchhoff(F - h * dF, a0, act, muscle_fraction, K_BULK)
+            second_piola_kirchhoff(F + h * dF, a0, act, muscle_fraction, K_BULK, fibre_prestretch=prestretch)
+            - second_piola_kirchhoff(F - h * dF, a0, act, muscle_fraction, K_BULK, fibre_prestretch=prestretch)
         ) / (2 * h)
         dC = 0.5 * (np.swapaxes(dF, 1, 2) @ F + np.swapaxes(F, 1, 2) @ dF)  # dS = CC : dC / 2 * 2
         analytic = np.einsum("nijkl,nkl->nij", CC, dC)
         err = np.linalg.norm(fd - analytic, axis=(1, 2)) / np.linalg.norm(analytic, axis=(1, 2))
         worst = max(worst, err.max())
     assert worst < 1e-6
+
+
+@pytest.mark.parametrize("prestretch", [1.0, 1.15, 1.3])
+def test_prestretch_moves_the_force_length_curve_and_nothing_else(prestretch):
+    """SPEC 3.3 fibre reference: in an isochoric uniaxial stretch lambda_T along the fibre of pure
+    muscle, the fibre's Cauchy stress minus the isotropic part is S_max f(lambda_0 lambda_T) at
+    full activation (plus the passive c3 (lambda_M^c4 - 1)): lambda_0 does not scale the force."""
+    p = DEFAULT_PARAMETERS
+    a0 = np.array([0.0, 0.0, 1.0])
+    for lam_T in (0.8, 1.0, 1.1, 1.3 / prestretch):
+        F = np.diag([lam_T**-0.5, lam_T**-0.5, lam_T])
+        sigma = [F @ second_piola_kirchhoff(F, a0, act, 1.0, K_BULK, fibre_prestretch=prestretch) @ F.T for act in (0.0, 1.0)]
+        active = sigma[1][2, 2] - sigma[0][2, 2]  # the isotropic and passive parts cancel
+        lam_M = prestretch * lam_T
+        assert active == pytest.approx(p.S_max * force_length(lam_M)[0], rel=1e-12)
+        passive = p.muscle.c3 * (lam_M**p.muscle.c4 - 1.0) if lam_M >= 1.0 else 0.0
+        # the isotropic part alone: a fibre reference of 0.5 keeps lambda_M below 1 (no passive term)
+        iso = F @ second_piola_kirchhoff(F, a0, 0.0, 1.0, K_BULK, fibre_prestretch=0.5) @ F.T
+        assert sigma[0][2, 2] - iso[2, 2] == pytest.approx(passive, rel=1e-9, abs=1e-15)
 
 
 def test_force_length_relation_shape():

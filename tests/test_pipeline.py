@@ -9,7 +9,8 @@ from persival.pipeline import STAGES, RunConfig, run
 def test_run_end_to_end_resumes_stage_by_stage(tmp_path):
     from rich.console import Console
 
-    config = RunConfig(held_out=4, samples=300, pod_folds=1, pod_epochs=3, paper_epochs=1, fe_states=False, bench=False)
+    config = RunConfig(simulator="analytic", held_out=4,
+                       samples=300, pod_folds=1, pod_epochs=3, paper_epochs=1, fe_states=False, bench=False)
     console = Console(record=True, width=120)
     first = run(tmp_path, config, console)
     names = [s[0] for s in STAGES if s[0] != "fe"]

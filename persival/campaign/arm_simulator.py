@@ -6,6 +6,7 @@ the model stage itself knows nothing of campaigns.
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -36,15 +37,51 @@ def muscle_surface(arm: ArmModel, name: str) -> tuple[np.ndarray, np.ndarray]:
     return nodes[surface], display_triangles(local[faces])
 
 
+METHODS = ("tables", "direct", "interpolate")
+
+
+def open_tables(arm: ArmModel, tables: str | None = None):
+    """The complete response table of ``arm`` (default folder: its state cache), or a clear error."""
+    from persival.campaign.response_table import ResponseTable, default_table_dir
+    from persival.model.state_cache import mesh_fingerprint
+
+    root = tables or default_table_dir(arm)
+    try:
+        table = ResponseTable.open(root, arm.model_hash, arm.profile, mesh_fingerprint(arm.mesh))
+    except FileNotFoundError:
+        raise FileNotFoundError(f"no response table of this model at {root}: build it with "
+                                f"`persival tables --profile {arm.profile}` (or use --option method=direct)") from None
+    if not table.complete:
+        raise ValueError(f"the response table at {root} is unfinished ({int(table.done.sum())} of {table.done.size} "
+                         f"columns): finish it with `persival tables --profile {arm.profile}`")
+    return table
+
+
 class ArmSimulator:
-    """Simulator protocol of persival.campaign over :class:`ArmModel` (warm starts: ArmState)."""
+    """Simulator protocol of persival.campaign over :class:`ArmModel` (warm starts: ArmState).
+
+    ``method``: "tables" (default; SPEC 8 route): the exact FE state from the per-muscle
+    response tables (persival.campaign.table_solve), which must be built first
+    (``persival tables``, or :func:`ensure_tables`); a retry falls back to the direct solve.
+    "direct": the coupled solve continued from the hanging arm or a neighbour.
+    "interpolate": the table-only path (no FE solve; a surrogate, for comparisons).
+    """
 
     name = "arm"
 
-    def __init__(self, model_file: str | None = None, profile: str = "quick") -> None:
+    def __init__(self, model_file: str | None = None, profile: str = "quick", method: str = "tables",
+                 tables: str | None = None) -> None:
+        if method not in METHODS:
+            raise ValueError(f"arm simulator method must be one of {', '.join(METHODS)}, got {method!r}")
         self.arm = ArmModel(model_file, profile)
+        self.method = method
         self.default_options = self.arm.options
         self.surfaces = {name: muscle_surface(self.arm, name) for name in MUSCLES}
+        self.table_solver = None
+        if method != "direct":
+            from persival.campaign.table_solve import TableSolver
+
+            self.table_solver = TableSolver(self.arm, open_tables(self.arm, tables))
 
     def reference(self) -> ReferenceGeometry:
         return ReferenceGeometry(
@@ -53,13 +90,21 @@ class ArmSimulator:
                 for name, (ids, triangles) in self.surfaces.items()
             },
             model_hash=self.arm.model_hash,
-            description={"model": self.arm.spec.name, "profile": self.arm.profile, "units": "mm"},
+            description={"model": self.arm.spec.name, "profile": self.arm.profile, "units": "mm", "method": self.method},
         )
 
     def simulate(self, activations, warm_start: ArmState | None = None, attempt: int = 0):
-        # retries: smaller first load steps
+        # retries: the direct path with smaller first load steps
         self.arm.set_options(replace(self.default_options, initial_step=self.default_options.initial_step / 2**attempt))
-        state = self.arm.solve(activations, warm_start=warm_start)
+        if self.method == "interpolate":
+            return self._interpolated(activations), None
+        if self.table_solver is not None and attempt == 0:
+            near = self.arm.base_state().elbow_angle_deg  # the root the direct solve from the hanging arm finds
+            state = self.table_solver.solve(activations, near_deg=near)
+            state.statistics["path"] = "tables"
+        else:
+            state = self.arm.solve(activations, warm_start=warm_start)
+            state.statistics["path"] = "direct"
         x = self.arm.mesh.points + state.displacement
         result = SimulationResult(
             elbow_angle_deg=state.elbow_angle_deg,
@@ -68,3 +113,34 @@ class ArmSimulator:
             wall_time_s=state.wall_time_s,
         )
         return result, state
+
+    def _interpolated(self, activations) -> SimulationResult:
+        t0 = time.perf_counter()
+        near = self.arm.base_state().elbow_angle_deg
+        theta, u = self.table_solver.interpolate(activations, near_deg=near)
+        x = self.arm.mesh.points + u
+        return SimulationResult(elbow_angle_deg=theta, surfaces={name: x[ids] for name, (ids, _) in self.surfaces.items()},
+                                statistics={"path": "interpolate"}, wall_time_s=time.perf_counter() - t0)
+
+
+def ensure_tables(model_file=None, profile: str = "quick", tables: str | None = None, progress=None,
+                  scheduler: str | None = None, n_workers: int | None = None, angles=None, levels=None):
+    """Build (or finish) the response tables the ``tables`` method needs; returns the table.
+    ``angles``, ``levels``: the grid (default: response_table's DEFAULT_ANGLES, DEFAULT_LEVELS)."""
+    from persival.campaign.response_table import DEFAULT_ANGLES, DEFAULT_LEVELS, build_response_table
+
+    arm = ArmModel(model_file, profile)
+    arm.base_state()  # cached: the table workers read each muscle's rest state from it
+    return build_response_table(arm, tables, DEFAULT_ANGLES if angles is None else angles,
+                                DEFAULT_LEVELS if levels is None else levels, model_file=model_file, scheduler=scheduler,
+                                n_workers=n_workers, progress=progress)
+
+
+def prepare_spec(spec, progress=None, scheduler: str | None = None, n_workers: int | None = None):
+    """Before a campaign of the arm with the tables (the default method): build or finish the
+    response tables once, in the driver, so that no worker builds them. Other specs: nothing."""
+    if spec.kind != "arm" or spec.options.get("method", "tables") == "direct":
+        return None
+    options = spec.options
+    return ensure_tables(options.get("model_file"), options.get("profile", "quick"), options.get("tables"), progress,
+                         scheduler if scheduler != "inline" else "inline", n_workers)

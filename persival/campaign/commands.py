@@ -81,6 +81,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                 d = build_design(design, level, n_random, seed)
                 spec = build_spec(simulator or "arm", option, options_file, command, reference,
                                   surface, result_file)
+            _prepare(spec, scheduler, workers)
             summary = run_campaign(store, d, spec, scheduler=scheduler, n_workers=workers,
                                    timeout_s=timeout, max_attempts=max_attempts,
                                    retry_failed=retry_failed, progress=progress)
@@ -122,6 +123,19 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     _register_moments(app)
 
 
+def _prepare(spec, scheduler, workers) -> None:
+    """The FE arm's response tables before its campaign (built once per model and mesh)."""
+    from rich.console import Console
+
+    from persival.campaign.arm_simulator import prepare_spec
+
+    if spec.kind != "arm":
+        return
+    with Console().status("FE arm: meshing, hanging arm, response tables (built once per model)") as status:
+        prepare_spec(spec, lambda done, total: status.update(f"FE arm: response table columns {done}/{total}"),
+                     scheduler, workers)
+
+
 def _print_summary(summary: dict) -> None:
     from rich.console import Console
     from rich.table import Table
@@ -144,7 +158,7 @@ def _print_summary(summary: dict) -> None:
     Console().print(table)
 
 
-def _grid(text: str, what: str) -> list[float]:
+def parse_grid(text: str, what: str) -> list[float]:
     """'0:160:10' (start:stop:step, stop included) or a comma-separated list."""
     import numpy as np
 
@@ -182,7 +196,7 @@ def _register_moments(app: typer.Typer) -> None:
 
         console = Console()
         with user_errors(out=out):  # every check before the meshing; a new file is removed on a user error
-            grid = check_grids(_grid(angles, "--angles"), _grid(levels, "--levels"))
+            grid = check_grids(parse_grid(angles, "--angles"), parse_grid(levels, "--levels"))
             spec, model_hash = load_model_file(model)
             spec.profile(profile)
             check_output_file(out)

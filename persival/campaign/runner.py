@@ -49,7 +49,7 @@ _POLL_S = 0.5
 log = logging.getLogger(__name__)
 
 
-def _available_cores() -> int:
+def available_cores() -> int:
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not Linux
@@ -176,7 +176,7 @@ def _run_dask(store, design, spec, factory, pending, record, tally, *, scheduler
     cluster = None
     if scheduler is None:
         cluster = LocalCluster(
-            n_workers=n_workers or _available_cores(), threads_per_worker=1, processes=True,
+            n_workers=n_workers or available_cores(), threads_per_worker=1, processes=True,
             dashboard_address=None, silence_logs=logging.ERROR,
         )
         client = Client(cluster)

@@ -133,6 +133,38 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             result = run_fe_benchmark(mesh_size, activation, repeats, backend)
         print_fe_benchmark(result)
 
+    @bench_app.command("arm")
+    def bench_arm(
+        profile: str = typer.Option("quick", "--profile", help="Mesh profile of the built-in arm."),
+        states: int = typer.Option(10, "--states", min=1, help="Random activation vectors for the per-state timings."),
+        direct: int = typer.Option(0, "--direct", min=0, help="Of those, also solve this many by the direct coupled solve "
+                                   "(minutes each) and compare."),
+        campaign_level: int = typer.Option(2, "--campaign-level", min=0, max=3,
+                                           help="Run a sparse-grid campaign of this level through the runner (0: none)."),
+        out: Path | None = typer.Option(None, "--out", help="Also write the figures as JSON here."),
+    ) -> None:
+        """The FE arm at campaign scale: response tables, exact and table-only states, a campaign (SPEC 8)."""
+        import json
+
+        from rich.console import Console
+
+        from persival.evaluate.bench_arm import print_arm_benchmark, run_arm_benchmark
+        from persival.model.arm_file import load_model_file
+
+        with user_errors():
+            load_model_file()[0].profile(profile)
+            if out is not None:
+                check_output_file(out)
+        console = Console()
+        with console.status("FE arm benchmark") as status:
+            result = run_arm_benchmark(profile, states, min(direct, states), campaign_level,
+                                       progress=lambda text: status.update(f"FE arm benchmark: {text}"))
+        print_arm_benchmark(result)
+        if out is not None:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_text(json.dumps(result, indent=1, default=float))
+            console.print(f"wrote {out}")
+
     @bench_app.command("sg")
     def bench_sg(
         dim: int = typer.Option(5, min=1, help="Input dimension (activations)."),

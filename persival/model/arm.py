@@ -11,7 +11,7 @@ not touch each other or the bones (no contact, unlike the paper's mortar contact
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +24,7 @@ from persival.model.mesh import Tet10Mesh
 from persival.model.muscle_unit import MuscleState, MuscleUnit, line_rotation
 from persival.model.progress import SolveTracker
 from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
+from persival.model.state_cache import cached_mesh, load_states, model_cache_dir, save_states
 from persival.vocabulary import MUSCLES, check_activation_vector
 
 
@@ -113,7 +114,7 @@ class ArmModel:
         joint = self.spec.joint
         self.axis = np.asarray(joint.axis, dtype=float) / np.linalg.norm(joint.axis)
         self.centre = np.asarray(joint.centre, dtype=float)
-        self.mesh, self.muscle_cells, self.muscle_nodes = self._build_mesh()
+        self.mesh, self.muscle_cells, self.muscle_nodes = self._mesh()
         self.material = self._material()
         self.units = {m.name: self._unit(m) for m in self.spec.ordered_muscles()}
         self._base: ArmState | None = None
@@ -165,9 +166,21 @@ class ArmModel:
         """Length (mm) of the muscle's centre line in its mesh pose: the scale of its tissue layout."""
         return float(np.linalg.norm(np.diff(self.centre_line(muscle), axis=0), axis=1).sum())
 
-    def _build_mesh(self):
-        points, cells, node_sets, cell_data = [], [], {}, {"muscle": [], "fibre": [], "arclength": []}
+    def _mesh(self):
+        """The arm's mesh (from the on-disk cache when this model and profile were meshed before)
+        and each muscle's cells and nodes (contiguous ranges, in file order)."""
+        mesh = cached_mesh(self.model_hash, self.spec.name, self.profile, self._build_mesh)
         muscle_cells, muscle_nodes = {}, {}
+        for index, muscle in enumerate(self.spec.ordered_muscles()):
+            cells = np.flatnonzero(mesh.cell_data["muscle"] == index)
+            muscle_cells[muscle.name] = cells
+            nodes = np.unique(mesh.cells[cells])
+            muscle_nodes[muscle.name] = np.arange(nodes[0], nodes[-1] + 1)
+        return mesh, muscle_cells, muscle_nodes
+
+    def _build_mesh(self) -> Tet10Mesh:
+        """gmsh: every muscle's swept solid, numbered one after the other (cell data "muscle")."""
+        points, cells, node_sets, cell_data = [], [], {}, {"muscle": [], "fibre": [], "arclength": []}
         offset = 0
         for index, muscle in enumerate(self.spec.ordered_muscles()):
             line = self.centre_line(muscle)
@@ -175,9 +188,6 @@ class ArmModel:
             mesh = swept_solid_mesh(line, radius, self.spec.mesh_size(self.profile, muscle.name))
             points.append(mesh.points)
             cells.append(mesh.cells + offset)
-            start_cell = sum(len(c) for c in cells[:-1])
-            muscle_cells[muscle.name] = np.arange(start_cell, start_cell + mesh.n_cells)
-            muscle_nodes[muscle.name] = np.arange(offset, offset + mesh.n_nodes)
             node_sets[f"{muscle.name}/origin"] = mesh.node_sets["origin"] + offset
             node_sets[f"{muscle.name}/insertion"] = mesh.node_sets["insertion"] + offset
             cell_data["muscle"].append(np.full(mesh.n_cells, index))
@@ -189,7 +199,7 @@ class ArmModel:
             cell_data={k: np.concatenate(v) for k, v in cell_data.items()},
         )
         mesh.check()
-        return mesh, muscle_cells, muscle_nodes
+        return mesh
 
     def _material(self) -> MaterialField:
         n = self.mesh.n_cells
@@ -234,18 +244,61 @@ class ArmModel:
     def cell_activation(self, activations: np.ndarray) -> np.ndarray:
         return np.asarray(activations, dtype=float)[self.mesh.cell_data["muscle"]]
 
-    def base_state(self, progress=None) -> ArmState:
+    def base_state(self, progress=None, cache: bool = True) -> ArmState:
         """The hanging arm (all activations 0): every muscle continued from its mesh pose.
-        ``progress(SolveProgress)`` is called at every load step (persival.model.progress)."""
+        ``progress(SolveProgress)`` is called at every load step (persival.model.progress).
+
+        With ``cache`` it is read from the on-disk cache of this model and mesh when there
+        (:mod:`persival.model.state_cache`; the joint equilibrium is re-converged from it, one
+        Newton iteration per muscle) and written there after a fresh solve.
+        ``statistics["from_cache"]`` says which happened.
+        """
         if self._base is None:
             t0 = time.perf_counter()
-            tracker = SolveTracker(progress, "rest state")
-            rest = {name: unit.rest_state(tracker.muscle(name)) for name, unit in self.units.items()}
-            tracker.phase = "joint equilibrium"
-            state = self._equilibrium(np.zeros(5), rest, self.start_angle_deg, tracker)
+            cached = self._cached_base() if cache else None
+            if cached is not None:
+                rest, start, angle = cached
+                for name, unit in self.units.items():
+                    unit._rest = rest[name]
+                state = self._equilibrium(np.zeros(5), start, angle, SolveTracker(progress, "cached rest state"))
+            else:
+                tracker = SolveTracker(progress, "rest state")
+                rest = {name: unit.rest_state(tracker.muscle(name)) for name, unit in self.units.items()}
+                tracker.phase = "joint equilibrium"
+                state = self._equilibrium(np.zeros(5), rest, self.start_angle_deg, tracker)
+                if cache:
+                    save_states(self.cache_dir() / "rest_state.npz",
+                                {"groups": ["rest", "hanging"], "elbow_angle_deg": state.elbow_angle_deg,
+                                 "model_hash": self.model_hash, "profile": self.profile},
+                                {"rest": rest, "hanging": state.muscle_states})
+            state.statistics["from_cache"] = cached is not None
             state.wall_time_s = time.perf_counter() - t0
             self._base = state
         return self._base
+
+    def cache_dir(self) -> Path:
+        """This model's and mesh's folder of the state cache (persival.model.state_cache)."""
+        return model_cache_dir(self)
+
+    def _cached_base(self):
+        loaded = load_states(self.cache_dir() / "rest_state.npz", list(self.units))
+        if loaded is None:
+            return None
+        header, groups = loaded
+        if header.get("model_hash") != self.model_hash:
+            return None
+        # tension NaN: the states are re-converged (checked) by Newton, not taken as solved
+        hanging = {name: replace(s, tension=float("nan")) for name, s in groups["hanging"].items()}
+        return groups["rest"], hanging, float(header["elbow_angle_deg"])
+
+    def equilibrium_from(self, activations, start: dict[str, MuscleState], angle_deg: float, progress=None) -> ArmState:
+        """Joint equilibrium for ``activations`` continued from given muscle states near
+        ``angle_deg`` (e.g. interpolated from response tables, persival.campaign.response_table)."""
+        target = check_activation_vector(activations)
+        t0 = time.perf_counter()
+        state = self._equilibrium(target, start, float(angle_deg), SolveTracker(progress))
+        state.wall_time_s = time.perf_counter() - t0
+        return state
 
     def solve(self, activations, warm_start: ArmState | None = None, progress=None) -> ArmState:
         """Equilibrium for the five activations, continued from ``warm_start`` (or the hanging arm);

@@ -177,8 +177,15 @@ def _distance_to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.norm(p - (a + t * d)))
 
 
+# Bumped whenever the physics code changes the states a model file produces, so that stores,
+# tables and caches keyed by the model hash are never reused across it. 2: the fibre reference
+# lambda_0 moves the force-length curve only (SPEC 3.3; issue 11).
+PHYSICS_VERSION = 2
+
+
 def model_hash(text: str) -> str:
-    return hashlib.sha256(text.encode()).hexdigest()
+    """sha256 of the model file's text and the physics version (provenance key of every store)."""
+    return hashlib.sha256(f"persival-physics-{PHYSICS_VERSION}\n{text}".encode()).hexdigest()
 
 
 def load_model_file(path: str | Path | None = None) -> tuple[ArmModelFile, str]:

@@ -12,6 +12,8 @@ flops of LU.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -49,6 +51,9 @@ class SparseSymmetricSolver:
         self._lu = None
         if backend == "pardiso":
             self._pardiso = _pypardiso.PyPardisoSolver(mtype=-2)
+            # pypardiso looks for MKL with a recursive glob over sys.prefix on every solver it
+            # makes (0.8 s each, five per arm, profiled); the library it found is named once
+            os.environ.setdefault("PYPARDISO_MKL_RT", self._pardiso.libmkl._name)
             # iparm(11)/(13) (1-based): scaling and weighted matching help indefinite systems
             self._pardiso.set_iparm(11, 1)
             self._pardiso.set_iparm(13, 1)

@@ -132,10 +132,14 @@ def _law_point(F, a0, act, gm, k, pre, p, S, CC, with_tangent):
     B3 = -(2.0 / 3.0) * c1 * p13 * I1 - (4.0 / 3.0) * c2 * p23 * I2
     g_vol = k * (Jdet - 1.0) * Jdet  # S_vol = k (J - 1) J C^-1
 
-    # Fibre terms. The muscle's fibres see lambda_M = lambda_0 sqrt(a0 . C a0) (SPEC 3.3: the
-    # fibre reference of the mesh pose relative to slack length); the tendon's collagen is
-    # slack in the mesh pose, so its passive term sees lambda_T = sqrt(a0 . C a0). Applying
-    # lambda_0 to the tendon would pre-tension it by c3 (1.2^c4 - 1) ~ 100 MPa at lambda_0 = 1.2.
+    # Fibre terms (SPEC 3.3, "fibre reference"). lambda_T = sqrt(a0 . C a0) is the stretch from
+    # the mesh pose, lambda_M = lambda_0 lambda_T the muscle fibre's stretch from its slack
+    # length. The muscle's terms are g(lambda_M) / lambda_T^2 M with g = c3 (lambda_M^c4 - 1) +
+    # act S_max f(lambda_M): lambda_0 shifts the force-length and passive curves and nothing
+    # else, so the fibre's Cauchy stress (J = 1) is S_max f(lambda_M) whatever the mesh pose.
+    # The helpers give g(lam) / lam^2 at lam = lambda_M; times lambda_0^2 that is g / lambda_T^2.
+    # The tendon's collagen is slack in the mesh pose: its passive term sees lambda_T only
+    # (lambda_0 on the tendon would pre-tension it by c3 (1.2^c4 - 1) ~ 100 MPa at 1.2).
     aCa = 0.0
     for I in range(3):
         for J in range(3):
@@ -147,7 +151,8 @@ def _law_point(F, a0, act, gm, k, pre, p, S, CC, with_tangent):
     dphi_act = p[13] * (df - 2.0 * f / lam) / (lam * lam)
     phi_pm, dphi_pm = _passive_fibre_point(lam, p[2], p[3])
     phi_pt, dphi_pt = _passive_fibre_point(lam_T, p[6], p[7])
-    phi = gm * (phi_pm + act * phi_act) + gT * phi_pt
+    pre2 = pre * pre
+    phi = gm * pre2 * (phi_pm + act * phi_act) + gT * phi_pt
     b3v = B3 + g_vol
     for I in range(3):
         for J in range(3):
@@ -163,8 +168,9 @@ def _law_point(F, a0, act, gm, k, pre, p, S, CC, with_tangent):
     a_ci = -(2.0 / 3.0) * c1 * p13 - (4.0 / 3.0) * c2 * p23 * I1
     a_cc = (4.0 / 3.0) * c2 * p23
     a_vv = (2.0 / 9.0) * c1 * p13 * I1 + (8.0 / 9.0) * c2 * p23 * I2 + 0.5 * k * (2.0 * Jdet - 1.0) * Jdet
-    # d(lambda_M)/dC = lambda_0^2 / (2 lambda_M) M, d(lambda_T)/dC = M / (2 lambda_T)
-    a_mm = gm * (dphi_pm + act * dphi_act) * pre * pre / (2.0 * lam) + gT * dphi_pt / (2.0 * lam_T)
+    # d(lambda_M)/dC = lambda_0^2 / (2 lambda_M) M, d(lambda_T)/dC = M / (2 lambda_T); the muscle
+    # term carries the lambda_0^2 of phi as well
+    a_mm = gm * (dphi_pm + act * dphi_act) * pre2 * pre2 / (2.0 * lam) + gT * dphi_pt / (2.0 * lam_T)
     for I in range(3):
         for J in range(3):
             dIJ = 1.0 if I == J else 0.0

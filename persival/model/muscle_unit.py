@@ -141,6 +141,8 @@ class MuscleUnit:
         if not np.isfinite(length) or length <= 0:
             raise ValueError(f"muscle {self.name!r}: length must be positive, got {length}")
         start = start or self.rest_state(progress)
+        if start.length == length and start.activation == activation and np.isfinite(start.tension):
+            return start  # already the equilibrium there (e.g. the joint iteration's first angle)
         state = self._from_library(float(length), float(activation), progress)
         if state is None:
             state = self._continue(float(length), float(activation), start, progress=progress)
@@ -166,10 +168,18 @@ class MuscleUnit:
         if hi.length - lo.length > self.library_gap_mm:
             return None
         w = (length - lo.length) / (hi.length - lo.length)
-        guess = (1.0 - w) * lo.displacement + w * hi.displacement
+        return self.solve_from_guess(length, activation, (1.0 - w) * lo.displacement + w * hi.displacement, progress)
+
+    def solve_from_guess(self, length: float, activation: float, guess: np.ndarray, progress=None,
+                         max_iterations: int = 12) -> MuscleState | None:
+        """Plain Newton at (length, activation) from a guessed displacement (no load stepping);
+        None if it does not converge within ``max_iterations``. The guess's insertion face is
+        put where ``length`` puts it, so an interpolation of neighbouring states is a good guess.
+        """
         self._insertion_face.start[:] = self._insertion_face.end[:] = (length - self.mesh_length) * self.direction
         options = self.solver.options
-        self.solver.options = replace(options, initial_step=1.0, min_step=1.0, max_iterations=min(options.max_iterations, 12))
+        self.solver.options = replace(options, initial_step=1.0, min_step=1.0,
+                                      max_iterations=min(options.max_iterations, max_iterations))
         try:
             solution = self.solver.solve(activation, initial_displacement=guess, initial_activation=activation,
                                          progress=progress)

@@ -1,0 +1,170 @@
+"""CLI of the FE arm as a data engine: ``persival tables`` and ``persival simulate`` (issue 17).
+
+They live with the campaign stage because that is where the FE arm is a simulator: the response
+tables are built in parallel with dask and stored like a campaign, and ``simulate`` answers from
+them (the exact path of persival.campaign.table_solve) when they exist.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import typer
+
+from persival.cli_errors import check_output_dir, user_errors
+from persival.model.defaults import profiles_help
+from persival.vocabulary import MUSCLES, N_ACTIVATIONS
+
+ACTIVATIONS_HELP = f"{N_ACTIVATIONS} comma-separated activations in [0, 1], in the order {', '.join(MUSCLES)}; e.g. 0.5,0,0,0,0."
+
+
+def parse_activations(text: str) -> list[float]:
+    """The --activations option: malformed text is typer's usage error (the range: check_activations)."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise typer.BadParameter(f"activations must be {N_ACTIVATIONS} comma-separated numbers, e.g. 0.5,0,0,0,0") from None
+    if len(values) != N_ACTIVATIONS:
+        raise typer.BadParameter(f"need {N_ACTIVATIONS} activations ({', '.join(MUSCLES)}), got {len(values)}")
+    return values
+
+
+def register(app: typer.Typer) -> None:
+    """Attach ``tables`` and ``simulate`` to the main app."""
+
+    @app.command("tables")
+    def tables(
+        profile: str = typer.Option("quick", "--profile", help=profiles_help()),
+        model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+        out: Path | None = typer.Option(None, "--out", help="Table folder (default: the model's state cache)."),
+        moments_out: Path | None = typer.Option(None, "--moments-out",
+                                                help="Also write the moments as a moment table (.npz, for `persival motion`)."),
+        angles: str = typer.Option("0:160:5", "--angles", help="Elbow angles, deg: START:STOP:STEP or a list."),
+        levels: str = typer.Option("0,0.25,0.5,0.75,1", "--levels", help="Activation levels from 0 to 1."),
+        scheduler: str | None = typer.Option(None, "--scheduler",
+                                             help="Dask scheduler address, or 'inline'; default: a LocalCluster."),
+        workers: int | None = typer.Option(None, "--workers", help="LocalCluster worker processes (default: one per core)."),
+    ) -> None:
+        """Per-muscle FE response tables over (elbow angle, activation): moments, forces, node states.
+
+        Built once per model and mesh (resumable: a killed build keeps its finished columns);
+        `persival simulate` and FE-arm campaigns answer from them.
+        """
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        from persival.campaign.arm_simulator import ensure_tables
+        from persival.campaign.commands import parse_grid
+        from persival.campaign.moment_table import TableMismatchError, check_grids
+        from persival.model.arm_file import load_model_file
+
+        console = Console()
+        with user_errors(TableMismatchError):
+            grid = check_grids(parse_grid(angles, "--angles"), parse_grid(levels, "--levels"))
+            load_model_file(model)[0].profile(profile)
+            if moments_out is not None and moments_out.suffix != ".npz":
+                raise ValueError(f"--moments-out must name a .npz file, got {moments_out}")
+            t0 = time.perf_counter()
+            bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                           console=console)
+            with bar:
+                task = bar.add_task("meshing, hanging arm", total=None)
+
+                def report(done, total):
+                    bar.update(task, completed=done, total=total, description="response table columns")
+
+                table = ensure_tables(model, profile, str(out) if out else None, report, scheduler, workers, *grid)
+            if moments_out is not None:
+                moments_out.parent.mkdir(parents=True, exist_ok=True)
+                table.moment_table().save(moments_out)
+        _print_table(console, table, time.perf_counter() - t0)
+        if moments_out is not None:
+            console.print(f"wrote the moment table {moments_out}")
+
+    @app.command()
+    def simulate(
+        activations: str = typer.Option(..., "--activations", "-a", help=ACTIVATIONS_HELP),
+        model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+        profile: str = typer.Option("quick", "--profile", help=profiles_help()),
+        method: str = typer.Option("auto", "--method",
+                                   help="tables (from `persival tables`), direct (coupled continuation) or auto "
+                                        "(tables when built)."),
+        out: Path = typer.Option(Path("results/simulate"), "--out", help="Output directory (state.json + VTU)."),
+    ) -> None:
+        """Solve the FE arm for one activation vector; write state.json and VTU files."""
+        from rich.console import Console
+
+        from persival.model.arm_file import load_model_file
+        from persival.vocabulary import check_activation_vector
+
+        console = Console()
+        alpha = parse_activations(activations)
+        with user_errors():  # every input is checked before the meshing and solve
+            alpha = check_activation_vector(alpha).tolist()
+            load_model_file(model)[0].profile(profile)
+            if method not in ("auto", "tables", "direct"):
+                raise ValueError(f"--method must be auto, tables or direct, got {method!r}")
+            check_output_dir(out)
+        with user_errors(out=out):
+            state, arm, path = _solve_one(console, model, profile, method, alpha)
+            from persival.model.output import write_state
+
+            write_state(arm, state, out)
+        console.print(
+            f"elbow angle [bold]{state.elbow_angle_deg:.2f} deg[/bold] ({path}), moment residual "
+            f"{state.moment_residual:.2e} N mm, {state.statistics['iterations']} Newton iterations, "
+            f"{state.wall_time_s:.1f} s solve, max |J-1| {state.max_volume_change:.2e}"
+        )
+        console.print(f"wrote {out}/state.json and VTU files (open {out}/*.vtu in ParaView)")
+
+
+def _solve_one(console, model, profile: str, method: str, alpha):
+    """(state, arm, 'tables' | 'direct') for one activation vector; a failed solve is a typer.Exit(3)."""
+    from persival.campaign.arm_simulator import open_tables
+    from persival.campaign.table_solve import TableSolver
+    from persival.model.arm import ArmModel
+    from persival.model.progress import ConsoleProgress
+    from persival.model.solver import ConvergenceError
+
+    with console.status("meshing the arm (gmsh, cached after the first run)"):
+        arm = ArmModel(model, profile)
+    with console.status("the hanging arm (activations 0)") as status, \
+            ConsoleProgress(console, status, "the hanging arm") as report:
+        base = arm.base_state(progress=report)
+    table = None
+    if method != "direct":
+        try:
+            table = open_tables(arm)
+        except (FileNotFoundError, ValueError) as exc:
+            if method == "tables":
+                raise
+            console.print(f"[dim]{exc}; solving directly (minutes)[/dim]")
+    with console.status(f"solving activations {alpha}") as status, \
+            ConsoleProgress(console, status, f"activations {alpha}") as report:
+        try:
+            if table is not None:
+                return TableSolver(arm, table).solve(alpha, near_deg=base.elbow_angle_deg, progress=report), arm, "tables"
+            return arm.solve(alpha, progress=report), arm, "direct"
+        except ConvergenceError as exc:
+            typer.echo(f"error: the FE solve did not converge: {exc}; nothing was written", err=True)
+            raise typer.Exit(3) from None
+
+
+def _print_table(console, table, seconds: float) -> None:
+    import numpy as np
+    from rich.table import Table
+
+    moments = table.moment_table()
+    picks = [k for k, a in enumerate(table.angles_deg) if a in (0.0, 30.0, 60.0, 90.0, 120.0, 150.0)]
+    t = Table(title=f"response table {table.root}: fully active moments (N mm); {seconds:.0f} s this run")
+    for col in ("muscle", *[f"{table.angles_deg[k]:g} deg" for k in picks], "failed solves", "compute s"):
+        t.add_column(col, justify="right")
+    done = table.done
+    for m, name in enumerate(MUSCLES):
+        secs = sum(float(table.column(name, j)["seconds"]) for j in range(len(table.levels)) if done[m, j])
+        t.add_row(name, *[f"{moments.moments[m, k, -1]:.0f}" for k in picks], str(int(np.isnan(moments.tension[m]).sum())),
+                  f"{secs:.0f}")
+    console.print(t)
+    lo, hi = moments.finite_range_deg()
+    console.print(f"{int(done.sum())} of {done.size} columns, angles {lo:g} to {hi:g} deg converged at every level")

@@ -1,0 +1,297 @@
+"""Per-muscle response tables of the FE arm over (theta, a_m): moments, forces and node states.
+
+SPEC 3.3 / 8, issue 17. Without muscle-muscle contact every muscle is its own FE body whose
+state depends on the elbow angle theta and its own activation a_m only, so a table of each
+muscle's FE equilibria on a (theta, a) grid answers the whole arm: the joint equilibrium of any
+activation vector is one scalar equation in the tabulated moments, and each muscle's shape at
+the root is its table state there (:mod:`persival.campaign.table_solve` uses the tables).
+
+A column is one muscle at one activation level over every table angle, computed by continuation
+along theta (:func:`~persival.campaign.moment_table.sweep_muscle`), each level continued from
+the previous level's longest state (continuation along a). Layout of a table folder:
+
+    header.json                  format, model hash, profile, mesh fingerprint, angles, levels
+    columns/<muscle>-<j>.npz     tension (N), stiffness (N/mm), displacement (n_theta, n_nodes, 3)
+                                 in the muscle's own frame (float32), NaN where a solve failed
+
+Every column file is written to a temporary name and renamed when it is finished, so a killed
+build keeps every finished column and resumes with the next; the columns of different muscles
+are computed in parallel by dask worker processes (one task per muscle: its levels are a chain).
+A folder of another model, profile, mesh or grid is refused with a message naming the mismatch.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from persival.campaign.moment_table import FINE_STEP_DEG, MomentTable, TableMismatchError, check_grids, sweep_muscle
+from persival.model.muscle_unit import MuscleState
+from persival.model.state_cache import mesh_fingerprint
+from persival.vocabulary import MUSCLES
+
+__all__ = ["FORMAT", "DEFAULT_ANGLES", "DEFAULT_LEVELS", "ResponseTable", "TableMismatchError", "build_response_table",
+           "default_table_dir"]
+
+log = logging.getLogger(__name__)
+FORMAT = "persival-response-table"
+DEFAULT_ANGLES = tuple(float(a) for a in np.arange(0.0, 160.0 + 1e-9, 5.0))
+# the levels of a level-2 sparse grid (and, every other one, of level 1): its states need no
+# continuation in a, only the re-solve at the equilibrium angle
+DEFAULT_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
+def default_table_dir(arm) -> Path:
+    """Where the tables of this model and mesh live by default: beside its cached rest state."""
+    return arm.cache_dir() / "response_table"
+
+
+@dataclass
+class ResponseTable:
+    """A table folder: its header, and its columns loaded on demand."""
+
+    root: Path
+    header: dict
+    _columns: dict = field(default_factory=dict, repr=False)
+
+    # ------------------------------------------------------------------ opening
+    @classmethod
+    def create_or_open(cls, root: str | Path, arm, angles=DEFAULT_ANGLES, levels=DEFAULT_LEVELS) -> ResponseTable:
+        """The table at ``root`` for this arm and grid: opened if it exists (must match), else created."""
+        angles, levels = check_grids(angles, levels)
+        root = Path(root)
+        if (root / "header.json").exists():
+            table = cls.open(root, arm.model_hash, arm.profile, mesh_fingerprint(arm.mesh))
+            if not (np.array_equal(table.angles_deg, angles) and np.array_equal(table.levels, levels)):
+                raise TableMismatchError(f"{root} has angles {table.angles_deg.tolist()} and levels {table.levels.tolist()}; "
+                                         f"asked for {angles.tolist()} and {levels.tolist()} (use another folder)")
+            return table
+        if root.exists() and any(root.iterdir()):
+            raise TableMismatchError(f"{root} exists and is not a response table (no header.json); pick an empty folder")
+        (root / "columns").mkdir(parents=True, exist_ok=True)
+        fine = np.arange(angles[0], angles[-1] + 1e-9, FINE_STEP_DEG)
+        muscles = arm.spec.ordered_muscles()
+        fa = arm.spec.forearm
+        header = {
+            "format": FORMAT, "version": 1, "model_hash": arm.model_hash, "profile": arm.profile,
+            "mesh_fingerprint": mesh_fingerprint(arm.mesh), "angles_deg": angles.tolist(), "levels": levels.tolist(),
+            "muscles": list(MUSCLES), "n_nodes": {m.name: int(arm.units[m.name].mesh.n_nodes) for m in muscles},
+            "forearm": {"mass_kg": fa.mass, "centre_of_mass_mm": fa.centre_of_mass, "gravity_m_s2": fa.gravity,
+                        "hand_distance_mm": fa.hand_distance},
+            "fine_deg": fine.tolist(),
+            "fine_dL": [[arm.muscle_length(m, t)[1] for t in fine] for m in muscles],
+            "fine_gravity": [arm.gravity_moment(t) for t in fine],
+            "fine_joint": [arm.passive_joint_moment(t) for t in fine],
+            "lengths_mm": [[arm.muscle_length(m, t)[0] for t in angles] for m in muscles],
+        }
+        _write_atomic(root / "header.json", json.dumps(header).encode())
+        return cls(root, header)
+
+    @classmethod
+    def open(cls, root: str | Path, model_hash: str | None = None, profile: str | None = None,
+             mesh: str | None = None) -> ResponseTable:
+        """Read a table folder; refuse one of another model (hash), profile or mesh."""
+        root = Path(root)
+        try:
+            header = json.loads((root / "header.json").read_text())
+        except FileNotFoundError:
+            raise FileNotFoundError(f"{root}: no response table here (no header.json)") from None
+        except (OSError, ValueError) as exc:
+            raise TableMismatchError(f"{root}/header.json is not a response table header ({exc})") from None
+        if header.get("format") != FORMAT:
+            raise TableMismatchError(f"{root} is not a response table (format {header.get('format')!r})")
+        if model_hash is not None and header["model_hash"] != model_hash:
+            raise TableMismatchError(f"{root} was built for another model: model hash {header['model_hash'][:12]}, "
+                                     f"this model {model_hash[:12]}")
+        if profile is not None and header["profile"] != profile:
+            raise TableMismatchError(f"{root} was built for mesh profile {header['profile']!r}, not {profile!r}")
+        if mesh is not None and header["mesh_fingerprint"] != mesh:
+            raise TableMismatchError(f"{root} was built on another mesh (fingerprint {header['mesh_fingerprint'][:12]}, "
+                                     f"this mesh {mesh[:12]}: another gmsh version or mesh size)")
+        return cls(root, header)
+
+    # ------------------------------------------------------------------ grid and columns
+    @property
+    def angles_deg(self) -> np.ndarray:
+        return np.asarray(self.header["angles_deg"], dtype=float)
+
+    @property
+    def levels(self) -> np.ndarray:
+        return np.asarray(self.header["levels"], dtype=float)
+
+    def lengths(self, muscle: str) -> np.ndarray:
+        return np.asarray(self.header["lengths_mm"][MUSCLES.index(muscle)], dtype=float)
+
+    def column_path(self, muscle: str, level: int) -> Path:
+        return self.root / "columns" / f"{muscle}-{level}.npz"
+
+    def is_done(self, muscle: str, level: int) -> bool:
+        return self.column_path(muscle, level).is_file()
+
+    @property
+    def done(self) -> np.ndarray:
+        """(5, n_levels) bool: column finished."""
+        return np.array([[self.is_done(m, j) for j in range(len(self.levels))] for m in MUSCLES])
+
+    @property
+    def complete(self) -> bool:
+        return bool(self.done.all())
+
+    def column(self, muscle: str, level: int) -> dict:
+        """tension (n_theta,), stiffness (n_theta,), displacement (n_theta, n_nodes, 3) float32, seconds."""
+        key = (muscle, level)
+        if key not in self._columns:
+            with np.load(self.column_path(muscle, level), allow_pickle=False) as data:
+                self._columns[key] = {k: data[k] for k in data.files}
+        return self._columns[key]
+
+    def write_column(self, muscle: str, level: int, sweep: dict, seconds: float) -> None:
+        n = self.header["n_nodes"][muscle]
+        displacement = np.full((len(self.angles_deg), n, 3), np.nan, dtype=np.float32)
+        for k, state in enumerate(sweep["states"]):
+            if state is not None:
+                displacement[k] = state.displacement
+        path = self.column_path(muscle, level)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.writing.npz")
+        np.savez_compressed(tmp, tension=sweep["tension_N"], stiffness=sweep["stiffness_N_per_mm"],
+                            displacement=displacement, seconds=np.array(seconds))
+        os.replace(tmp, path)
+
+    def state(self, muscle: str, k: int, level: int) -> MuscleState | None:
+        """The tabulated state of ``muscle`` at angle index k and level index j (None if it failed)."""
+        col = self.column(muscle, level)
+        if not np.isfinite(col["tension"][k]):
+            return None
+        return MuscleState(float(self.lengths(muscle)[k]), float(self.levels[level]),
+                           col["displacement"][k].astype(float), float(col["tension"][k]), float(col["stiffness"][k]), 0.0)
+
+    def moment_table(self) -> MomentTable:
+        """The tables' moments as a :class:`MomentTable` (unfinished columns NaN, ``done`` False)."""
+        n_theta, n_a = len(self.angles_deg), len(self.levels)
+        tension = np.full((5, n_theta, n_a), np.nan)
+        stiffness = np.full((5, n_theta, n_a), np.nan)
+        done = self.done
+        seconds = [[None] * n_a for _ in MUSCLES]
+        for m, name in enumerate(MUSCLES):
+            for j in range(n_a):
+                if done[m, j]:
+                    col = self.column(name, j)
+                    tension[m, :, j], stiffness[m, :, j] = col["tension"], col["stiffness"]
+                    seconds[m][j] = float(col["seconds"])
+        h = self.header
+        meta = {"model_hash": h["model_hash"], "profile": h["profile"], "forearm": h["forearm"], "column_seconds": seconds}
+        return MomentTable(self.angles_deg, self.levels, tension, stiffness, done, np.asarray(h["fine_deg"]),
+                           np.asarray(h["fine_dL"]), np.asarray(h["fine_gravity"]), np.asarray(h["fine_joint"]), meta)
+
+    def build_seconds(self) -> float:
+        """Sum of the finished columns' compute times (s)."""
+        done = self.done
+        return float(sum(float(self.column(m, j)["seconds"]) for i, m in enumerate(MUSCLES)
+                         for j in range(len(self.levels)) if done[i, j]))
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.writing")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
+def _longest_state(table: ResponseTable, muscle: str, level: int) -> MuscleState | None:
+    """A finished column's state at the muscle's longest table length (the next level's start)."""
+    return table.state(muscle, int(np.argmax(table.lengths(muscle))), level)
+
+
+def build_muscle_columns(model_file, profile: str, root: str, muscle: str) -> dict:
+    """Compute every unfinished column of one muscle (a dask task, or inline). Returns timings."""
+    from persival.model.arm import ArmModel
+
+    t0 = time.perf_counter()
+    arm = ArmModel(model_file, profile)
+    table = ResponseTable.open(root, arm.model_hash, arm.profile, mesh_fingerprint(arm.mesh))
+    cached = arm._cached_base()
+    if cached is not None:  # the muscle's rest state from the state cache, when there
+        arm.units[muscle]._rest = cached[0][muscle]
+    spec = next(m for m in arm.spec.ordered_muscles() if m.name == muscle)
+    computed = 0
+    start = None
+    for j, a in enumerate(table.levels):
+        if table.is_done(muscle, j):
+            start = None
+            continue
+        if start is None and j > 0:
+            start = _longest_state(table, muscle, j - 1)
+        t1 = time.perf_counter()
+        sweep = sweep_muscle(arm, spec, table.angles_deg, float(a), max_step_deg=10.0, start=start)
+        table.write_column(muscle, j, sweep, time.perf_counter() - t1)
+        start = sweep["longest_state"]
+        computed += 1
+    return {"muscle": muscle, "columns": computed, "seconds": time.perf_counter() - t0}
+
+
+def build_response_table(arm, root: str | Path | None = None, angles=DEFAULT_ANGLES, levels=DEFAULT_LEVELS,
+                         model_file=None, scheduler: str | None = None, n_workers: int | None = None,
+                         progress=None, muscles=None) -> ResponseTable:
+    """Build (or finish) the response tables of ``arm`` under ``root`` (default: the state cache).
+
+    ``scheduler``: None starts a dask LocalCluster of ``n_workers`` single-threaded processes
+    (default: one per core, at most one per muscle), ``"inline"`` computes here, an address uses
+    a running cluster. ``progress(done_columns, total_columns)`` is called as columns finish.
+    ``muscles``: compute only these muscles' columns (the others stay unfinished).
+    """
+    root = Path(root) if root is not None else default_table_dir(arm)
+    table = ResponseTable.create_or_open(root, arm, angles, levels)
+    asked = MUSCLES if muscles is None else muscles
+    todo = [m for m in asked if not all(table.is_done(m, j) for j in range(len(table.levels)))]
+    total = table.done.size
+
+    def report():
+        if progress is not None:
+            progress(int(table.done.sum()), total)
+
+    report()
+    if not todo:
+        return table
+    model = str(model_file) if model_file is not None else None
+    if scheduler == "inline":
+        for muscle in todo:
+            build_muscle_columns(model, arm.profile, str(root), muscle)
+            report()
+        return table
+    from distributed import Client, LocalCluster, wait
+
+    from persival.campaign.runner import available_cores
+
+    cluster = None
+    if scheduler is None:
+        workers = min(n_workers or available_cores(), len(todo))
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.CRITICAL)
+        client = Client(cluster)
+    else:
+        client = Client(scheduler, timeout="60s")
+    try:
+        # the largest muscles first, so that the last task to start is a short one
+        todo.sort(key=lambda m: -table.header["n_nodes"][m])
+        futures = [client.submit(build_muscle_columns, model, arm.profile, str(root), m, key=f"table-{m}", pure=False)
+                   for m in todo]
+        pending = set(futures)
+        while pending:
+            try:  # columns finish inside a task: the folder is polled for them
+                _, pending = wait(pending, timeout=2.0, return_when="FIRST_COMPLETED")
+            except TimeoutError:
+                pass
+            report()
+        for f in futures:
+            f.result()  # raise a worker's error here
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    report()
+    return table

@@ -1,0 +1,165 @@
+"""The FE arm's state for any activation vector from its response tables (SPEC 8, issue 17).
+
+Two paths, both from :class:`~persival.campaign.response_table.ResponseTable`:
+
+* **exact** (:meth:`TableSolver.solve`): the scalar joint equilibrium
+  ``sum_m M_m(theta, a_m) + M_gravity + M_joint = 0`` on the tabulated moments (Hermite in
+  theta, linear in a) gives theta_0; each muscle is re-solved by Newton at (theta_0, a_m) from
+  the bilinear interpolation of its four neighbouring table states (in its own frame, weights in
+  length and activation, so the insertion face sits exactly where theta_0 puts it), and the
+  joint equilibrium is converged once more with the FE moments (ArmModel.equilibrium_from). The
+  result is a converged FE solution of the full model, to the solver's tolerances, not an
+  interpolation. A muscle whose Newton from the guess fails continues from its nearest table
+  state instead (load stepping, as the direct solve does).
+* **table-only** (:meth:`TableSolver.interpolate`): theta_0 and the interpolated node positions,
+  no FE solve: five 2-D interpolations and one scalar root (a surrogate of its own).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy.optimize import brentq
+
+from persival.campaign.response_table import ResponseTable
+from persival.model.muscle_unit import MuscleState, line_rotation
+from persival.vocabulary import MUSCLES, check_activation_vector
+
+__all__ = ["TableSolver", "OutsideTableError"]
+
+
+class OutsideTableError(ValueError):
+    """The joint equilibrium of these activations lies outside the tabulated angles."""
+
+
+def _bracket(grid: np.ndarray, x: float) -> tuple[int, float]:
+    """Index k and weight w with x = (1 - w) grid[k] + w grid[k + 1] (clamped to the grid)."""
+    k = int(np.clip(np.searchsorted(grid, x, side="right") - 1, 0, len(grid) - 2))
+    w = float(np.clip((x - grid[k]) / (grid[k + 1] - grid[k]), 0.0, 1.0))
+    return k, w
+
+
+class TableSolver:
+    """Exact and table-only states of the FE arm from a complete response table."""
+
+    def __init__(self, arm, table: ResponseTable):
+        if not table.complete:
+            raise ValueError(f"{table.root}: the response table is unfinished ({int(table.done.sum())} of "
+                             f"{table.done.size} columns); run `persival tables` to finish it")
+        self.arm = arm
+        self.table = table
+        self.moments = table.moment_table()
+        self.lo_deg, self.hi_deg = self.moments.finite_range_deg()
+        self._fine = np.arange(self.lo_deg, self.hi_deg + 1e-9, 0.25)
+        self._level_moments = {m: self.moments.level_moments(m, self._fine) for m in MUSCLES}
+
+    # ------------------------------------------------------------------ joint equilibrium on the table
+    def residual(self, theta_deg, activations) -> np.ndarray:
+        """sum_m M_m(theta, a_m) + M_gravity + M_joint (N mm; > 0 turns the forearm towards flexion)."""
+        theta = np.atleast_1d(np.asarray(theta_deg, dtype=float))
+        total = self.moments.gravity_moment(theta) + self.moments.passive_joint_moment(theta)
+        for name, a in zip(MUSCLES, activations):
+            total = total + self.moments.moment(name, theta, np.full(len(theta), a))
+        return total
+
+    def equilibrium_angle(self, activations, near_deg: float | None = None) -> float:
+        """The stable root of :meth:`residual` (sign + to -) nearest ``near_deg`` (default: the
+        lowest), refined by Brent's method on the interpolated moments."""
+        alpha = check_activation_vector(activations)
+        g = sum(np.array([np.interp(a, self.moments.levels, row) for row in self._level_moments[name]])
+                for name, a in zip(MUSCLES, alpha))
+        g = g + self.moments.gravity_moment(self._fine) + self.moments.passive_joint_moment(self._fine)
+        down = np.flatnonzero((g[:-1] > 0) & (g[1:] <= 0))
+        if not len(down):
+            side = "above" if g[-1] > 0 else "below"
+            raise OutsideTableError(f"the equilibrium of activations {alpha.tolist()} lies {side} the tabulated "
+                                    f"angles {self.lo_deg:g} to {self.hi_deg:g} deg")
+        k = down[0] if near_deg is None else down[np.argmin(np.abs(self._fine[down] - near_deg))]
+        a, b = self._fine[k], self._fine[k + 1]
+        if g[k + 1] == 0:
+            return float(b)
+        return float(brentq(lambda t: float(self.residual(t, alpha)[0]), a, b, xtol=1e-10))
+
+    # ------------------------------------------------------------------ states from the table
+    def guess(self, muscle: str, theta_deg: float, activation: float) -> MuscleState | None:
+        """Bilinear interpolation of the muscle's table states at (theta, a), weights in its
+        length and activation (None where a neighbour failed)."""
+        lengths = self.table.lengths(muscle)
+        L = self.length(muscle, theta_deg)
+        k, w_theta = _bracket(self.table.angles_deg, theta_deg)
+        dL = lengths[k + 1] - lengths[k]
+        w = (L - lengths[k]) / dL if abs(dL) > 1e-9 else w_theta
+        j, v = _bracket(self.table.levels, activation)
+        parts = [(1 - w) * (1 - v), w * (1 - v), (1 - w) * v, w * v]
+        cols = [(k, j), (k + 1, j), (k, j + 1), (k + 1, j + 1)]
+        guess = np.zeros((self.table.header["n_nodes"][muscle], 3))
+        for weight, (kk, jj) in zip(parts, cols):
+            if weight == 0.0:
+                continue
+            d = self.table.column(muscle, jj)["displacement"][kk]
+            if not np.isfinite(d).all():
+                return None
+            guess += weight * d
+        return MuscleState(float(L), float(activation), guess, float("nan"), float("nan"), 0.0)
+
+    def nearest(self, muscle: str, theta_deg: float, activation: float) -> MuscleState:
+        """The finite table state nearest (theta, a) (theta in degrees counts like a in 1/30)."""
+        table = self.table
+        best, where = np.inf, None
+        for j, level in enumerate(table.levels):
+            tension = table.column(muscle, j)["tension"]
+            for k, angle in enumerate(table.angles_deg):
+                d = abs(angle - theta_deg) / 30.0 + abs(level - activation)
+                if np.isfinite(tension[k]) and d < best:
+                    best, where = d, (k, j)
+        if where is None:
+            raise ValueError(f"the response table has no converged state of {muscle}")
+        return table.state(muscle, *where)
+
+    def muscle_state(self, muscle: str, theta_deg: float, activation: float) -> tuple[MuscleState, str]:
+        """The FE equilibrium of one muscle at (theta, a) and how it was reached ('guess' or 'continuation')."""
+        unit = self.arm.units[muscle]
+        guess = self.guess(muscle, theta_deg, activation)
+        if guess is not None:
+            state = unit.solve_from_guess(guess.length, activation, guess.displacement)
+            if state is not None:
+                return state, "guess"
+        return unit.solve(self.length(muscle, theta_deg), activation, self.nearest(muscle, theta_deg, activation)), \
+            "continuation"
+
+    def length(self, muscle: str, theta_deg: float) -> float:
+        """Origin-insertion length (mm) of the muscle at theta."""
+        return self.arm.muscle_length(self.arm.spec.muscle(muscle), theta_deg)[0]
+
+    # ------------------------------------------------------------------ the two paths
+    def solve(self, activations, near_deg: float | None = None, progress=None):
+        """The exact path: a converged FE state of the whole arm (an ArmState)."""
+        alpha = check_activation_vector(activations)
+        t0 = time.perf_counter()
+        theta0 = self.equilibrium_angle(alpha, near_deg)
+        starts, how = {}, {}
+        for name, a in zip(MUSCLES, alpha):
+            starts[name], how[name] = self.muscle_state(name, theta0, float(a))
+        t_start = time.perf_counter() - t0
+        state = self.arm.equilibrium_from(alpha, starts, theta0, progress)
+        state.statistics.update({"table_angle_deg": theta0, "table_start": how, "start_iterations":
+                                 int(sum(s.iterations for s in starts.values())), "start_seconds": t_start})
+        state.wall_time_s = time.perf_counter() - t0
+        return state
+
+    def interpolate(self, activations, near_deg: float | None = None) -> tuple[float, np.ndarray]:
+        """The table-only path: (theta_0, world displacements (n_nodes, 3) of all muscles)."""
+        alpha = check_activation_vector(activations)
+        theta0 = self.equilibrium_angle(alpha, near_deg)
+        u = np.zeros_like(self.arm.mesh.points)
+        for muscle, a in zip(self.arm.spec.ordered_muscles(), alpha):
+            guess = self.guess(muscle.name, theta0, float(a))
+            if guess is None:
+                guess = self.nearest(muscle.name, theta0, float(a))
+            unit = self.arm.units[muscle.name]
+            insertion = self.arm.forearm_point(muscle.insertion, theta0)
+            direction = (insertion - unit.origin) / np.linalg.norm(insertion - unit.origin)
+            nodes = self.arm.muscle_nodes[muscle.name]
+            u[nodes] = unit.positions(guess, line_rotation(unit.direction, direction)) - self.arm.mesh.points[nodes]
+        return theta0, u
