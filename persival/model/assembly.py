@@ -19,9 +19,13 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit, prange
 
-from persival.model import tet10
+from persival.model import material, tet10
+from persival.model.kernel_cache import drop_stale_kernels
 from persival.model.material import DEFAULT_PARAMETERS, MaterialParameters, _law_point
 from persival.model.mesh import Tet10Mesh
+
+# the element kernel inlines the law: its cached build must not outlive a change of material.py
+drop_stale_kernels(__file__, [material.__file__])
 
 
 @dataclass
