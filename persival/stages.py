@@ -141,6 +141,14 @@ def campaign(out: Path, config, console) -> dict:
             run_campaign(path, design, spec, scheduler=INLINE if config.simulator == "analytic" else None, progress=True)
         with CampaignStore.open(path) as store:
             stores[name] = {"path": str(path), **store.summary()}
+    if config.simulator == "arm":  # the table-only path on the same activations: a row of the evaluation
+        path = folder / "held_out_table_only.zarr"
+        with CampaignStore.open(folder / "held_out.zarr") as held:
+            design = held.design
+        run_campaign(path, design, SimulatorSpec("arm", {**options, "method": "interpolate"}), scheduler=INLINE,
+                     progress=False)
+        with CampaignStore.open(path) as store:
+            stores["held_out_table_only"] = {"path": str(path), **store.summary()}
     for name, s in stores.items():
         console.print(f"  {name}: {s['done']} done, {s['failed']} failed, simulator {s['simulator']}")
     return stores

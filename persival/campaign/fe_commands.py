@@ -65,6 +65,9 @@ def register(app: typer.Typer) -> None:
             load_model_file(model)[0].profile(profile)
             if moments_out is not None and moments_out.suffix != ".npz":
                 raise ValueError(f"--moments-out must name a .npz file, got {moments_out}")
+            if out is not None and out.exists() and not (out / "header.json").is_file() and \
+                    (out.is_file() or any(out.iterdir())):
+                raise TableMismatchError(f"{out} exists and is not a response table (no header.json); pick an empty folder")
             t0 = time.perf_counter()
             bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                            console=console)

@@ -65,6 +65,18 @@ def _net_rows(run, truth, tested_on) -> list[dict]:
     return rows
 
 
+def _table_rows(layout, run, truth, tested_on) -> list[dict]:
+    """The FE arm's table-only path (SPEC 8: five 2-D interpolations and a scalar root, issue 17)
+    on the same held-out activations, when the run solved them that way too."""
+    if not layout.held_out_table_only.exists():
+        return []
+    table_only = _truth(layout.held_out_table_only, run.sg, len(truth))
+    if not np.allclose(table_only.activations, truth.activations):
+        raise ValueError(f"{layout.held_out_table_only} holds other activations than {layout.held_out}")
+    return [_row("FE response tables (table-only)", "all", tested_on, table_only.positions, truth, run.sg.surfaces,
+                 table_only.elbow_angles)]
+
+
 def error_propagation_table(run: LoadedRun, n_states: int = 25) -> dict:
     layout = run.layout
     if not layout.held_out.exists():
@@ -73,7 +85,7 @@ def error_propagation_table(run: LoadedRun, n_states: int = 25) -> dict:
     label = held.source.get("label", "held-out states")
     scopes = sorted({s for net in run.networks.values() for s in network_scopes(net)}, key=lambda s: s != "all")
     held_on = f"{len(held)} held-out states"
-    rows = _sg_rows(run, held, scopes, held_on) + _net_rows(run, held, held_on)
+    rows = _sg_rows(run, held, scopes, held_on) + _net_rows(run, held, held_on) + _table_rows(layout, run, held, held_on)
     sg_mae = {r["scope"]: r["mean MAE_mm"] for r in rows if r["surrogate"] == "SG"}
     for r in rows[len(scopes):]:
         r["added_pct"] = 100.0 * (r["mean MAE_mm"] / sg_mae[r["scope"]] - 1.0) if sg_mae[r["scope"]] > 0 else None

@@ -32,6 +32,11 @@ class RunLayout:
         return self.root / "campaign" / "held_out.zarr"
 
     @property
+    def held_out_table_only(self) -> Path:
+        """The held-out design through the FE arm's table-only path (FE-arm runs only)."""
+        return self.root / "campaign" / "held_out_table_only.zarr"
+
+    @property
     def sg(self) -> Path:
         return self.root / "sg"
 
