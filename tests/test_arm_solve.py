@@ -187,3 +187,29 @@ def test_a_stalled_activation_jump_detours_through_the_taut_mesh_pose(arm, monke
     monkeypatch.setattr(unit.solver, "solve", always_stall)
     with pytest.raises(ConvergenceError, match="muscle .brachialis. from length .* line search failed"):
         unit._continue(slack, 1.0, start)
+
+
+def test_solve_retries_with_smaller_steps_then_names_every_reason(arm, states, monkeypatch):
+    """ArmModel.solve's retry ladder (issue 11): smaller first activation steps, then a failure
+    that says what each try hit; the model's options are left as they were."""
+    original, steps = arm._equilibrium, []
+
+    def flaky(target, start, angle, tracker):
+        steps.append(arm.options.initial_step)
+        if len(steps) < 2:
+            raise ConvergenceError("stalled at t = 0.18")
+        return original(target, start, angle, tracker)
+
+    before = arm.options
+    monkeypatch.setattr(arm, "_equilibrium", flaky)
+    state = arm.solve([0.5, 0, 0, 0, 0], warm_start=states[1])
+    assert state.statistics["tries"] == 2 and steps == [before.initial_step, before.initial_step / 2]
+    assert arm.options == before
+
+    def stalled(target, start, angle, tracker):
+        raise ConvergenceError("stalled")
+
+    monkeypatch.setattr(arm, "_equilibrium", stalled)
+    with pytest.raises(ConvergenceError, match="failed 3 tries: first step 0.25: stalled; first step 0.125"):
+        arm.solve([0.6, 0, 0, 0, 0], warm_start=states[1])
+    assert arm.options == before

@@ -98,13 +98,21 @@ class ArmSimulator:
         self.arm.set_options(replace(self.default_options, initial_step=self.default_options.initial_step / 2**attempt))
         if self.method == "interpolate":
             return self._interpolated(activations), None
+        state = None
         if self.table_solver is not None and attempt == 0:
+            from persival.campaign.table_solve import OutsideTableError
+
             near = self.arm.base_state().elbow_angle_deg  # the root the direct solve from the hanging arm finds
-            state = self.table_solver.solve(activations, near_deg=near)
-            state.statistics["path"] = "tables"
+            try:
+                state = self.table_solver.solve(activations, near_deg=near)
+                state.statistics["path"] = "tables"
+            except OutsideTableError as exc:  # e.g. strong extensors: equilibrium below the table's 0 deg
+                path = f"direct ({exc})"
         else:
+            path = "direct" if self.table_solver is None else "direct (retry)"
+        if state is None:
             state = self.arm.solve(activations, warm_start=warm_start)
-            state.statistics["path"] = "direct"
+            state.statistics["path"] = path
         x = self.arm.mesh.points + state.displacement
         result = SimulationResult(
             elbow_angle_deg=state.elbow_angle_deg,

@@ -23,7 +23,6 @@ A folder of another model, profile, mesh or grid is refused with a message namin
 from __future__ import annotations
 
 import json
-import logging
 import os
 import time
 from dataclasses import dataclass, field
@@ -39,7 +38,6 @@ from persival.vocabulary import MUSCLES
 __all__ = ["FORMAT", "DEFAULT_ANGLES", "DEFAULT_LEVELS", "ResponseTable", "TableMismatchError", "build_response_table",
            "default_table_dir"]
 
-log = logging.getLogger(__name__)
 FORMAT = "persival-response-table"
 DEFAULT_ANGLES = tuple(float(a) for a in np.arange(0.0, 160.0 + 1e-9, 5.0))
 # the levels of a level-2 sparse grid (and, every other one, of level 1): its states need no
@@ -263,15 +261,13 @@ def build_response_table(arm, root: str | Path | None = None, angles=DEFAULT_ANG
             build_muscle_columns(model, arm.profile, str(root), muscle)
             report()
         return table
-    from distributed import Client, LocalCluster, wait
+    from distributed import Client, wait
 
-    from persival.campaign.runner import available_cores
+    from persival.campaign.runner import available_cores, local_cluster
 
     cluster = None
     if scheduler is None:
-        workers = min(n_workers or available_cores(), len(todo))
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=logging.CRITICAL)
+        cluster = local_cluster(min(n_workers or available_cores(), len(todo)))
         client = Client(cluster)
     else:
         client = Client(scheduler, timeout="60s")

@@ -56,6 +56,20 @@ def available_cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+# dask's nanny already sets OMP/MKL/OpenBLAS threads to 1 in its workers; numba's own pool is
+# not covered and took one thread per core in every worker (2 workers x 2 threads on 2 cores,
+# measured with numba.get_num_threads() in the workers): the FE kernels then fight for the cores.
+WORKER_ENV = {"NUMBA_NUM_THREADS": "1"}
+
+
+def local_cluster(n_workers: int | None = None):
+    """A LocalCluster of single-threaded worker processes (one per core by default)."""
+    from distributed import LocalCluster
+
+    return LocalCluster(n_workers=n_workers or available_cores(), threads_per_worker=1, processes=True,
+                        dashboard_address=None, silence_logs=logging.CRITICAL, env=WORKER_ENV)
+
+
 def _check_args(design, spec, timeout_s, max_attempts, n_workers, chunk_size) -> None:
     if not isinstance(design, Design):
         raise TypeError(f"design must be a persival.campaign.design.Design, got {type(design).__name__}")
@@ -171,14 +185,11 @@ def _run_inline(store, design, spec, factory, pending, record, tally, *, timeout
 
 def _run_dask(store, design, spec, factory, pending, record, tally, *, scheduler, n_workers,
               timeout_s, max_attempts, chunk_size) -> None:
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     cluster = None
     if scheduler is None:
-        cluster = LocalCluster(
-            n_workers=n_workers or available_cores(), threads_per_worker=1, processes=True,
-            dashboard_address=None, silence_logs=logging.ERROR,
-        )
+        cluster = local_cluster(n_workers)
         client = Client(cluster)
     else:
         if n_workers is not None:

@@ -300,15 +300,35 @@ class ArmModel:
         state.wall_time_s = time.perf_counter() - t0
         return state
 
+    retry_steps = (1.0, 0.5, 0.25)  # first load step of each try, relative to options.initial_step
+
     def solve(self, activations, warm_start: ArmState | None = None, progress=None) -> ArmState:
         """Equilibrium for the five activations, continued from ``warm_start`` (or the hanging arm);
-        ``progress`` as in :meth:`base_state`."""
+        ``progress`` as in :meth:`base_state`.
+
+        Retry ladder (as the campaign simulator's): a try whose muscles do not converge is
+        repeated with smaller first activation steps (``retry_steps``); when every try fails, the
+        ConvergenceError names each try's reason. ``statistics["tries"]`` counts them.
+        """
         target = check_activation_vector(activations)
         t0 = time.perf_counter()
         start = warm_start if warm_start is not None else self.base_state(progress)
         if warm_start is None and not np.any(target):
             return start  # the hanging arm itself (its statistics are those of its solve)
-        state = self._equilibrium(target, start.muscle_states, start.elbow_angle_deg, SolveTracker(progress))
+        options, reasons = self.options, []
+        try:
+            for scale in self.retry_steps:
+                self.set_options(replace(options, initial_step=options.initial_step * scale))
+                try:
+                    state = self._equilibrium(target, start.muscle_states, start.elbow_angle_deg, SolveTracker(progress))
+                    break
+                except ConvergenceError as exc:
+                    reasons.append(f"first step {options.initial_step * scale:g}: {exc}")
+            else:
+                raise ConvergenceError(f"activations {target.tolist()} failed {len(reasons)} tries: " + "; ".join(reasons))
+        finally:
+            self.set_options(options)
+        state.statistics["tries"] = len(reasons) + 1
         state.wall_time_s = time.perf_counter() - t0
         return state
 

@@ -143,7 +143,9 @@ class MuscleUnit:
         start = start or self.rest_state(progress)
         if start.length == length and start.activation == activation and np.isfinite(start.tension):
             return start  # already the equilibrium there (e.g. the joint iteration's first angle)
-        state = self._from_library(float(length), float(activation), progress)
+        near = abs(length - start.length) <= self.small_step_mm and activation == start.activation
+        # a start this near (the joint iteration's corrections) beats any interpolation of kept states
+        state = None if near else self._from_library(float(length), float(activation), progress)
         if state is None:
             state = self._continue(float(length), float(activation), start, progress=progress)
         self._remember(state)
