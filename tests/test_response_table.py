@@ -18,7 +18,7 @@ import pytest
 
 from persival.campaign.moment_table import TableMismatchError
 from persival.campaign.response_table import ResponseTable, build_response_table
-from persival.campaign.table_solve import TableSolver
+from persival.campaign.table_solve import OutsideTableError, TableSolver
 from persival.model.arm import ArmModel
 from persival.model.state_cache import mesh_fingerprint
 
@@ -70,13 +70,17 @@ def test_table_only_path_is_near_the_exact_state(arm, solver):
 
 
 def test_equilibrium_angle_solves_the_tabulated_moment_balance(solver):
-    for alpha in ([0, 0, 0, 0, 0], [1, 1, 1, 0, 0], [0, 0, 0, 1, 1], [0.3, 0.2, 0.1, 0.4, 0.9]):
+    for alpha in ([0, 0, 0, 0, 0], [1, 1, 1, 0, 0], [0, 0, 0, 0.3, 0.3], [0.3, 0.2, 0.1, 0.4, 0.9]):
         theta = solver.equilibrium_angle(alpha)
         assert abs(solver.residual(theta, alpha)[0]) < 1e-6
         # stable: the residual falls through zero (flexing below, extending above)
         assert solver.residual(theta - 0.5, alpha)[0] > 0 > solver.residual(theta + 0.5, alpha)[0]
     assert solver.equilibrium_angle([1, 1, 1, 0, 0]) > solver.equilibrium_angle([0, 0, 0, 0, 0]) \
-        > solver.equilibrium_angle([0, 0, 0, 1, 1])
+        > solver.equilibrium_angle([0, 0, 0, 0.3, 0.3])
+    # full extensors turn the forearm past full extension (the joint limit's stiffening holds it
+    # just below 0 deg): outside the table, a clear error (the campaign simulator then solves directly)
+    with pytest.raises(OutsideTableError, match="lies below the tabulated angles 0 to 160 deg"):
+        solver.equilibrium_angle([0, 0, 0, 1, 1])
 
 
 def test_bad_activations_are_refused_before_any_work(solver):

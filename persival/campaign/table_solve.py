@@ -71,8 +71,8 @@ class TableSolver:
                 for name, a in zip(MUSCLES, alpha))
         g = g + self.moments.gravity_moment(self._fine) + self.moments.passive_joint_moment(self._fine)
         down = np.flatnonzero((g[:-1] > 0) & (g[1:] <= 0))
-        if not len(down):
-            side = "above" if g[-1] > 0 else "below"
+        if not len(down):  # no stable root inside: the forearm turns past one end of the table
+            side = "below" if g[0] < 0 else "above"
             raise OutsideTableError(f"the equilibrium of activations {alpha.tolist()} lies {side} the tabulated "
                                     f"angles {self.lo_deg:g} to {self.hi_deg:g} deg")
         k = down[0] if near_deg is None else down[np.argmin(np.abs(self._fine[down] - near_deg))]
