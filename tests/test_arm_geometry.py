@@ -9,7 +9,7 @@ from persival.vocabulary import MUSCLES
 
 @pytest.fixture(scope="module")
 def simulator():
-    return ArmSimulator(profile="quick")
+    return ArmSimulator(profile="quick", method="direct")  # geometry only: no response tables needed
 
 
 def test_reference_surfaces_are_closed_and_outward(simulator):
