@@ -104,7 +104,7 @@ def fe(out: Path, config, console) -> dict:
             if not any(activations):
                 state = hanging
             elif solver is not None:
-                state = solver.solve(activations, near_deg=hanging.elbow_angle_deg, progress=report)
+                state = solver.solve(activations, progress=report)
             else:
                 state = arm.solve(activations, warm_start=hanging, progress=report)
         directories.append(write_state(arm, state, out / "fe" / name))

@@ -102,9 +102,8 @@ class ArmSimulator:
         if self.table_solver is not None and attempt == 0:
             from persival.campaign.table_solve import OutsideTableError
 
-            near = self.arm.base_state().elbow_angle_deg  # the root the direct solve from the hanging arm finds
             try:
-                state = self.table_solver.solve(activations, near_deg=near)
+                state = self.table_solver.solve(activations)
                 state.statistics["path"] = "tables"
             except OutsideTableError as exc:  # e.g. strong extensors: equilibrium below the table's 0 deg
                 path = f"direct ({exc})"
@@ -124,8 +123,7 @@ class ArmSimulator:
 
     def _interpolated(self, activations) -> SimulationResult:
         t0 = time.perf_counter()
-        near = self.arm.base_state().elbow_angle_deg
-        theta, u = self.table_solver.interpolate(activations, near_deg=near)
+        theta, u = self.table_solver.interpolate(activations)
         x = self.arm.mesh.points + u
         return SimulationResult(elbow_angle_deg=theta, surfaces={name: x[ids] for name, (ids, _) in self.surfaces.items()},
                                 statistics={"path": "interpolate"}, wall_time_s=time.perf_counter() - t0)
@@ -151,4 +149,4 @@ def prepare_spec(spec, progress=None, scheduler: str | None = None, n_workers: i
         return None
     options = spec.options
     return ensure_tables(options.get("model_file"), options.get("profile", "quick"), options.get("tables"), progress,
-                         scheduler if scheduler != "inline" else "inline", n_workers)
+                         scheduler, n_workers)

@@ -208,10 +208,11 @@ def _register_moments(app: typer.Typer) -> None:
             task = bar.add_task("moment table", total=5 * len(grid[1]))
             table = build_moment_table(arm, *grid, out=out, progress=lambda done, total, label: bar.update(
                 task, completed=done, description=label))
-        _print_table(console, table, time.perf_counter() - t0, out)
+        print_moment_table(console, table, time.perf_counter() - t0, out)
 
 
-def _print_table(console, table, seconds: float, out: Path) -> None:
+def print_moment_table(console, table, seconds: float, out: Path) -> None:
+    """Fully active moments at a few angles, failed solves and compute seconds per muscle."""
     import numpy as np
     from rich.table import Table
 

@@ -134,7 +134,7 @@ def _solve_one(console, model, profile: str, method: str, alpha):
         arm = ArmModel(model, profile)
     with console.status("the hanging arm (activations 0)") as status, \
             ConsoleProgress(console, status, "the hanging arm") as report:
-        base = arm.base_state(progress=report)
+        arm.base_state(progress=report)  # with its progress shown; the table solve reads it
     table = None
     if method != "direct":
         try:
@@ -147,7 +147,7 @@ def _solve_one(console, model, profile: str, method: str, alpha):
             ConsoleProgress(console, status, f"activations {alpha}") as report:
         try:
             if table is not None:
-                return TableSolver(arm, table).solve(alpha, near_deg=base.elbow_angle_deg, progress=report), arm, "tables"
+                return TableSolver(arm, table).solve(alpha, progress=report), arm, "tables"
             return arm.solve(alpha, progress=report), arm, "direct"
         except ConvergenceError as exc:
             typer.echo(f"error: the FE solve did not converge: {exc}; nothing was written", err=True)
@@ -155,19 +155,9 @@ def _solve_one(console, model, profile: str, method: str, alpha):
 
 
 def _print_table(console, table, seconds: float) -> None:
-    import numpy as np
-    from rich.table import Table
+    from persival.campaign.commands import print_moment_table
 
     moments = table.moment_table()
-    picks = [k for k, a in enumerate(table.angles_deg) if a in (0.0, 30.0, 60.0, 90.0, 120.0, 150.0)]
-    t = Table(title=f"response table {table.root}: fully active moments (N mm); {seconds:.0f} s this run")
-    for col in ("muscle", *[f"{table.angles_deg[k]:g} deg" for k in picks], "failed solves", "compute s"):
-        t.add_column(col, justify="right")
-    done = table.done
-    for m, name in enumerate(MUSCLES):
-        secs = sum(float(table.column(name, j)["seconds"]) for j in range(len(table.levels)) if done[m, j])
-        t.add_row(name, *[f"{moments.moments[m, k, -1]:.0f}" for k in picks], str(int(np.isnan(moments.tension[m]).sum())),
-                  f"{secs:.0f}")
-    console.print(t)
+    print_moment_table(console, moments, seconds, table.root)
     lo, hi = moments.finite_range_deg()
-    console.print(f"{int(done.sum())} of {done.size} columns, angles {lo:g} to {hi:g} deg converged at every level")
+    console.print(f"{int(table.done.sum())} of {table.done.size} columns, angles {lo:g} to {hi:g} deg converged at every level")

@@ -29,7 +29,8 @@ import numpy as np
 from persival.model.solver import ConvergenceError
 from persival.vocabulary import MUSCLES
 
-__all__ = ["MomentTable", "TableMismatchError", "build_moment_table", "check_grids", "resumable", "sweep_muscle", "FORMAT"]
+__all__ = ["MomentTable", "TableMismatchError", "build_moment_table", "empty_moment_table",
+           "check_grids", "resumable", "sweep_muscle", "FORMAT"]
 
 FORMAT = "persival-moment-table"
 FINE_STEP_DEG = 0.25  # geometry, gravity and passive joint are stored this finely (exact, cheap)
@@ -229,7 +230,7 @@ class MomentTable:
         return table
 
 
-def _new_table(arm, angles: np.ndarray, levels: np.ndarray) -> MomentTable:
+def empty_moment_table(arm, angles: np.ndarray, levels: np.ndarray) -> MomentTable:
     """An empty table with the exact geometry and loads on the fine grid (SPEC 3.3)."""
     fine = np.arange(angles[0], angles[-1] + 1e-9, FINE_STEP_DEG)
     muscles = arm.spec.ordered_muscles()
@@ -290,7 +291,7 @@ def build_moment_table(arm_or_profile, angles_deg, activations, progress=None, o
 
         arm = ArmModel(model_file, profile=arm_or_profile)
     table = resumable(out, arm.model_hash, arm.profile, angles, levels) if out is not None else None
-    table = table or _new_table(arm, angles, levels)
+    table = table or empty_moment_table(arm, angles, levels)
     total, count, longest = table.done.size, 0, {}
     for m, muscle in enumerate(arm.spec.ordered_muscles()):
         for j, a in enumerate(levels):

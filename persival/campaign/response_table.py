@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.campaign.moment_table import FINE_STEP_DEG, MomentTable, TableMismatchError, check_grids, sweep_muscle
+from persival.campaign.moment_table import MomentTable, TableMismatchError, check_grids, empty_moment_table, sweep_muscle
 from persival.model.muscle_unit import MuscleState
 from persival.model.state_cache import mesh_fingerprint
 from persival.vocabulary import MUSCLES
@@ -73,19 +73,15 @@ class ResponseTable:
         if root.exists() and any(root.iterdir()):
             raise TableMismatchError(f"{root} exists and is not a response table (no header.json); pick an empty folder")
         (root / "columns").mkdir(parents=True, exist_ok=True)
-        fine = np.arange(angles[0], angles[-1] + 1e-9, FINE_STEP_DEG)
+        geometry = empty_moment_table(arm, angles, levels)  # the exact geometry and loads on the fine grid
         muscles = arm.spec.ordered_muscles()
-        fa = arm.spec.forearm
         header = {
             "format": FORMAT, "version": 1, "model_hash": arm.model_hash, "profile": arm.profile,
             "mesh_fingerprint": mesh_fingerprint(arm.mesh), "angles_deg": angles.tolist(), "levels": levels.tolist(),
             "muscles": list(MUSCLES), "n_nodes": {m.name: int(arm.units[m.name].mesh.n_nodes) for m in muscles},
-            "forearm": {"mass_kg": fa.mass, "centre_of_mass_mm": fa.centre_of_mass, "gravity_m_s2": fa.gravity,
-                        "hand_distance_mm": fa.hand_distance},
-            "fine_deg": fine.tolist(),
-            "fine_dL": [[arm.muscle_length(m, t)[1] for t in fine] for m in muscles],
-            "fine_gravity": [arm.gravity_moment(t) for t in fine],
-            "fine_joint": [arm.passive_joint_moment(t) for t in fine],
+            "forearm": geometry.meta["forearm"], "fine_deg": geometry.fine_deg.tolist(),
+            "fine_dL": geometry.fine_dL.tolist(), "fine_gravity": geometry.fine_gravity.tolist(),
+            "fine_joint": geometry.fine_joint.tolist(),
             "lengths_mm": [[arm.muscle_length(m, t)[0] for t in angles] for m in muscles],
         }
         _write_atomic(root / "header.json", json.dumps(header).encode())
@@ -212,10 +208,8 @@ def build_muscle_columns(model_file, profile: str, root: str, muscle: str) -> di
     t0 = time.perf_counter()
     arm = ArmModel(model_file, profile)
     table = ResponseTable.open(root, arm.model_hash, arm.profile, mesh_fingerprint(arm.mesh))
-    cached = arm._cached_base()
-    if cached is not None:  # the muscle's rest state from the state cache, when there
-        arm.units[muscle]._rest = cached[0][muscle]
-    spec = next(m for m in arm.spec.ordered_muscles() if m.name == muscle)
+    arm.load_cached_rest_states()  # each muscle's rest state from the state cache, when there
+    spec = arm.spec.muscle(muscle)
     computed = 0
     start = None
     for j, a in enumerate(table.levels):

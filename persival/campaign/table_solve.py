@@ -23,7 +23,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from persival.campaign.response_table import ResponseTable
-from persival.model.muscle_unit import MuscleState, line_rotation
+from persival.model.muscle_unit import MuscleState
 from persival.vocabulary import MUSCLES, check_activation_vector
 
 __all__ = ["TableSolver", "OutsideTableError"]
@@ -134,10 +134,12 @@ class TableSolver:
 
     # ------------------------------------------------------------------ the two paths
     def solve(self, activations, near_deg: float | None = None, progress=None):
-        """The exact path: a converged FE state of the whole arm (an ArmState)."""
+        """The exact path: a converged FE state of the whole arm (an ArmState). ``near_deg``:
+        which stable root of the tabulated balance to start from (default: the one nearest the
+        hanging arm, as the direct solve from it)."""
         alpha = check_activation_vector(activations)
         t0 = time.perf_counter()
-        theta0 = self.equilibrium_angle(alpha, near_deg)
+        theta0 = self.equilibrium_angle(alpha, self._near(near_deg))
         starts, how = {}, {}
         for name, a in zip(MUSCLES, alpha):
             starts[name], how[name] = self.muscle_state(name, theta0, float(a))
@@ -151,15 +153,11 @@ class TableSolver:
     def interpolate(self, activations, near_deg: float | None = None) -> tuple[float, np.ndarray]:
         """The table-only path: (theta_0, world displacements (n_nodes, 3) of all muscles)."""
         alpha = check_activation_vector(activations)
-        theta0 = self.equilibrium_angle(alpha, near_deg)
-        u = np.zeros_like(self.arm.mesh.points)
-        for muscle, a in zip(self.arm.spec.ordered_muscles(), alpha):
-            guess = self.guess(muscle.name, theta0, float(a))
-            if guess is None:
-                guess = self.nearest(muscle.name, theta0, float(a))
-            unit = self.arm.units[muscle.name]
-            insertion = self.arm.forearm_point(muscle.insertion, theta0)
-            direction = (insertion - unit.origin) / np.linalg.norm(insertion - unit.origin)
-            nodes = self.arm.muscle_nodes[muscle.name]
-            u[nodes] = unit.positions(guess, line_rotation(unit.direction, direction)) - self.arm.mesh.points[nodes]
-        return theta0, u
+        theta0 = self.equilibrium_angle(alpha, self._near(near_deg))
+        states = {name: self.guess(name, theta0, float(a)) or self.nearest(name, theta0, float(a))
+                  for name, a in zip(MUSCLES, alpha)}
+        return theta0, self.arm.displacement(states, theta0)
+
+    def _near(self, near_deg: float | None) -> float:
+        """The root to pick: by default the one the direct solve from the hanging arm finds."""
+        return self.arm.base_state().elbow_angle_deg if near_deg is None else near_deg

@@ -258,8 +258,7 @@ class ArmModel:
             cached = self._cached_base() if cache else None
             if cached is not None:
                 rest, start, angle = cached
-                for name, unit in self.units.items():
-                    unit._rest = rest[name]
+                self._set_rest_states(rest)
                 state = self._equilibrium(np.zeros(5), start, angle, SolveTracker(progress, "cached rest state"))
             else:
                 tracker = SolveTracker(progress, "rest state")
@@ -279,6 +278,17 @@ class ArmModel:
     def cache_dir(self) -> Path:
         """This model's and mesh's folder of the state cache (persival.model.state_cache)."""
         return model_cache_dir(self)
+
+    def load_cached_rest_states(self) -> bool:
+        """Give every muscle its rest state from the state cache, if there; True if it was."""
+        cached = self._cached_base()
+        if cached is not None:
+            self._set_rest_states(cached[0])
+        return cached is not None
+
+    def _set_rest_states(self, rest: dict[str, MuscleState]) -> None:
+        for name, unit in self.units.items():
+            unit._rest = rest[name]
 
     def _cached_base(self):
         loaded = load_states(self.cache_dir() / "rest_state.npz", list(self.units))
