@@ -145,3 +145,69 @@ def test_rest_state_comes_from_the_cache_the_second_time(arm):
     assert abs(second.elbow_angle_deg - first.elbow_angle_deg) < 1e-6
     assert np.abs(second.displacement - first.displacement).max() < 1e-6
     assert second.statistics["iterations"] <= 10  # at most a Newton iteration or two per muscle
+
+
+def test_sensitivity_is_the_slope_of_the_equilibrium(arm):
+    """du/dL from the condensed solve equals the finite-difference slope of two equilibria."""
+    unit = arm.units["brachialis"]
+    rest = unit.rest_state()
+    h = 0.05
+    plus = unit.solve(rest.length + h, 0.5, rest)
+    minus = unit.solve(rest.length - h, 0.5, plus)
+    centre = unit.solve(rest.length, 0.5, minus)
+    slope = (plus.displacement - minus.displacement) / (2 * h)
+    assert np.abs(centre.sensitivity - slope).max() < 1e-2 * np.abs(slope).max()
+    # the insertion face moves rigidly along the line of action, one mm per mm
+    face = unit.mesh.node_sets["insertion"]
+    assert np.allclose(centre.sensitivity[face], unit.direction, atol=1e-12)
+
+
+def test_hermite_guess_reproduces_table_states_and_beats_linear(arm, solver):
+    muscle, level = "brachioradialis", 1  # a = 0.5
+    table = solver.table
+    k = 3
+    at_node = solver.guess(muscle, table.angles_deg[k], 0.5)
+    assert np.allclose(at_node.displacement, table.state(muscle, k, level).displacement, atol=1e-5)
+    theta = 0.5 * (table.angles_deg[k] + table.angles_deg[k + 1])
+    exact = arm.units[muscle].solve(solver.length(muscle, theta), 0.5, table.state(muscle, k, level))
+    hermite = np.abs(solver.guess(muscle, theta, 0.5).displacement - exact.displacement).max()
+    a, b = table.state(muscle, k, level), table.state(muscle, k + 1, level)
+    w = (exact.length - a.length) / (b.length - a.length)
+    linear = np.abs((1 - w) * a.displacement + w * b.displacement - exact.displacement).max()
+    assert hermite < 0.5 * linear, (hermite, linear)
+
+
+def test_tables_of_an_older_format_are_refused(arm, tmp_path):
+    root = tmp_path / "table"
+    build_response_table(arm, root, angles=[55.0, 60.0], levels=[0.0, 1.0], scheduler="inline", muscles=[])
+    header = json.loads((root / "header.json").read_text())
+    (root / "header.json").write_text(json.dumps({**header, "version": 1}))
+    with pytest.raises(TableMismatchError, match="format version 1"):
+        ResponseTable.open(root)
+
+
+def test_response_tables_answer_as_a_surrogate(arm, solver, tmp_path):
+    """The table-only path behind the common surrogate interface: fit, predict, save, load."""
+    from persival.campaign.arm_simulator import muscle_surface
+    from persival.campaign.simulator import SurfaceTopology
+    from persival.surrogate.base import load_surrogate
+    from persival.surrogate.dataset import Dataset, Surfaces
+    from persival.surrogate.table_surrogate import ResponseTableSurrogate
+
+    names = ("biceps", "triceps")
+    surfaces = Surfaces.from_topologies([SurfaceTopology(n, arm.mesh.points[muscle_surface(arm, n)[0]],
+                                                         muscle_surface(arm, n)[1]) for n in names])
+    alpha = np.array([[0.5, 0, 0, 0, 0], [0.2, 0.4, 0.1, 0.3, 0.0]])
+    theta0, u0 = solver.interpolate(alpha[0])
+    ids = np.concatenate([muscle_surface(arm, n)[0] for n in names])
+    states = np.stack([arm.mesh.points[ids] + solver.interpolate(a)[1][ids] for a in alpha])
+    data = Dataset(alpha, states, np.array([solver.interpolate(a)[0] for a in alpha]), surfaces,
+                   {"model_hash": arm.model_hash, "label": "FE arm (coarse), table-only"})
+    surrogate = ResponseTableSurrogate("coarse", tables=str(FIXTURE)).fit(data)
+    assert np.allclose(surrogate.predict(alpha), states)
+    assert np.allclose(surrogate.predict_angle(alpha), data.elbow_angles)
+    again = load_surrogate(surrogate.save(tmp_path / "tables"))
+    assert again.kind == "response-table" and np.allclose(again.predict(alpha[:1]), states[:1])
+    with pytest.raises(ValueError, match="same arm"):
+        ResponseTableSurrogate("coarse", tables=str(FIXTURE)).fit(
+            Dataset(alpha, states, data.elbow_angles, surfaces, {"model_hash": "0" * 64}))

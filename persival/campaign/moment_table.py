@@ -51,16 +51,28 @@ def _path(angles: np.ndarray, max_step_deg: float) -> tuple[np.ndarray, np.ndarr
 
 
 def _next_state(unit, length: float, activation: float, state, previous):
-    """The next state of a sweep: Newton from the secant extrapolation of the last two states
-    (their shapes change smoothly with the length), else load-stepped continuation from the last.
+    """The next state of a sweep: Newton from an extrapolation of the last states (their shapes
+    change smoothly with the length), else load-stepped continuation from the last.
 
-    Why: a slack, bowed muscle shortened by 9 mm took 100 to 200 Newton iterations by load
-    stepping from the last state (coarse brachioradialis, profiled); from the extrapolated
-    shape a few. The insertion face of the guess sits exactly at ``length`` (linear in L).
+    The extrapolation is the quadratic through the last state, its slope du/dL and the one
+    before (the tangent line when there is none before; the secant of the last two when the
+    slope is unknown). Why: a slack, bowed muscle shortened by 9 mm took 100 to 200 Newton
+    iterations by load stepping from the last state (coarse brachioradialis, profiled); from the
+    extrapolated shape a few. The insertion face of the guess sits exactly at ``length`` (it is
+    linear in L, and so is every extrapolation here).
     """
-    if previous is not None and state.length != previous.length and state.length != length:
-        w = (length - state.length) / (state.length - previous.length)
+    step = length - state.length
+    guess = None
+    if state.sensitivity is not None and step != 0.0:
+        guess = state.displacement + step * state.sensitivity
+        if previous is not None and previous.length != state.length:
+            back = previous.length - state.length
+            curvature = (previous.displacement - state.displacement - back * state.sensitivity) / back**2
+            guess = guess + step**2 * curvature
+    elif previous is not None and state.length != previous.length and step != 0.0:
+        w = step / (state.length - previous.length)
         guess = state.displacement + w * (state.displacement - previous.displacement)
+    if guess is not None:
         solved = unit.solve_from_guess(length, activation, guess, max_iterations=10)
         if solved is not None:
             return solved
@@ -239,6 +251,7 @@ def empty_moment_table(arm, angles: np.ndarray, levels: np.ndarray) -> MomentTab
     meta = {"model_hash": arm.model_hash, "profile": arm.profile,
             "forearm": {"mass_kg": fa.mass, "centre_of_mass_mm": fa.centre_of_mass, "gravity_m_s2": fa.gravity,
                         "hand_distance_mm": fa.hand_distance},
+            "joint_limits_deg": [float(v) for v in arm.spec.joint.limits_deg],
             "column_seconds": [[None] * len(levels) for _ in MUSCLES]}
     return MomentTable(
         angles_deg=angles, levels=levels, tension=np.full(shape, np.nan), stiffness=np.full(shape, np.nan),

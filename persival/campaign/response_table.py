@@ -12,7 +12,8 @@ the previous level's longest state (continuation along a). Layout of a table fol
 
     header.json                  format, model hash, profile, mesh fingerprint, angles, levels
     columns/<muscle>-<j>.npz     tension (N), stiffness (N/mm), displacement (n_theta, n_nodes, 3)
-                                 in the muscle's own frame (float32), NaN where a solve failed
+                                 in the muscle's own frame and its slope du/dL (same shape; float32),
+                                 NaN where a solve failed
 
 Every column file is written to a temporary name and renamed when it is finished, so a killed
 build keeps every finished column and resumes with the next; the columns of different muscles
@@ -35,11 +36,16 @@ from persival.model.muscle_unit import MuscleState
 from persival.model.state_cache import mesh_fingerprint
 from persival.vocabulary import MUSCLES
 
-__all__ = ["FORMAT", "DEFAULT_ANGLES", "DEFAULT_LEVELS", "ResponseTable", "TableMismatchError", "build_response_table",
+__all__ = ["FORMAT", "VERSION", "DEFAULT_ANGLES", "DEFAULT_LEVELS", "ResponseTable", "TableMismatchError", "build_response_table",
            "default_table_dir"]
 
 FORMAT = "persival-response-table"
-DEFAULT_ANGLES = tuple(float(a) for a in np.arange(0.0, 160.0 + 1e-9, 5.0))
+VERSION = 2  # 2: the columns carry du/dL (cubic Hermite starts); 1 had the states only
+# beyond the joint's limits (0, 160 deg) on both sides: strong extensors rest a few degrees
+# below 0 and, without bone contact (issue 11), an active triceps with the flexors turns the
+# forearm to 170 to 182 deg; a state whose equilibrium lies off the table is solved directly,
+# at about 20 times the cost
+DEFAULT_ANGLES = tuple(float(a) for a in np.arange(-10.0, 185.0 + 1e-9, 5.0))
 # the levels of a level-2 sparse grid (and, every other one, of level 1): its states need no
 # continuation in a, only the re-solve at the equilibrium angle
 DEFAULT_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0)
@@ -47,7 +53,7 @@ DEFAULT_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0)
 
 def default_table_dir(arm) -> Path:
     """Where the tables of this model and mesh live by default: beside its cached rest state."""
-    return arm.cache_dir() / "response_table"
+    return arm.cache_dir() / f"response_table-v{VERSION}"
 
 
 @dataclass
@@ -76,10 +82,11 @@ class ResponseTable:
         geometry = empty_moment_table(arm, angles, levels)  # the exact geometry and loads on the fine grid
         muscles = arm.spec.ordered_muscles()
         header = {
-            "format": FORMAT, "version": 1, "model_hash": arm.model_hash, "profile": arm.profile,
+            "format": FORMAT, "version": VERSION, "model_hash": arm.model_hash, "profile": arm.profile,
             "mesh_fingerprint": mesh_fingerprint(arm.mesh), "angles_deg": angles.tolist(), "levels": levels.tolist(),
             "muscles": list(MUSCLES), "n_nodes": {m.name: int(arm.units[m.name].mesh.n_nodes) for m in muscles},
-            "forearm": geometry.meta["forearm"], "fine_deg": geometry.fine_deg.tolist(),
+            "forearm": geometry.meta["forearm"], "joint_limits_deg": geometry.meta["joint_limits_deg"],
+            "fine_deg": geometry.fine_deg.tolist(),
             "fine_dL": geometry.fine_dL.tolist(), "fine_gravity": geometry.fine_gravity.tolist(),
             "fine_joint": geometry.fine_joint.tolist(),
             "lengths_mm": [[arm.muscle_length(m, t)[0] for t in angles] for m in muscles],
@@ -100,6 +107,9 @@ class ResponseTable:
             raise TableMismatchError(f"{root}/header.json is not a response table header ({exc})") from None
         if header.get("format") != FORMAT:
             raise TableMismatchError(f"{root} is not a response table (format {header.get('format')!r})")
+        if header.get("version") != VERSION:
+            raise TableMismatchError(f"{root} is a response table of format version {header.get('version')}, this "
+                                     f"PerSival reads version {VERSION}: build it again (`persival tables`)")
         if model_hash is not None and header["model_hash"] != model_hash:
             raise TableMismatchError(f"{root} was built for another model: model hash {header['model_hash'][:12]}, "
                                      f"this model {model_hash[:12]}")
@@ -138,7 +148,8 @@ class ResponseTable:
         return bool(self.done.all())
 
     def column(self, muscle: str, level: int) -> dict:
-        """tension (n_theta,), stiffness (n_theta,), displacement (n_theta, n_nodes, 3) float32, seconds."""
+        """tension (n_theta,), stiffness (n_theta,), displacement and sensitivity (n_theta, n_nodes, 3)
+        float32, seconds."""
         key = (muscle, level)
         if key not in self._columns:
             with np.load(self.column_path(muscle, level), allow_pickle=False) as data:
@@ -148,13 +159,15 @@ class ResponseTable:
     def write_column(self, muscle: str, level: int, sweep: dict, seconds: float) -> None:
         n = self.header["n_nodes"][muscle]
         displacement = np.full((len(self.angles_deg), n, 3), np.nan, dtype=np.float32)
+        sensitivity = displacement.copy()
         for k, state in enumerate(sweep["states"]):
             if state is not None:
                 displacement[k] = state.displacement
+                sensitivity[k] = state.sensitivity
         path = self.column_path(muscle, level)
         tmp = path.with_name(f".{path.name}.{os.getpid()}.writing.npz")
         np.savez_compressed(tmp, tension=sweep["tension_N"], stiffness=sweep["stiffness_N_per_mm"],
-                            displacement=displacement, seconds=np.array(seconds))
+                            displacement=displacement, sensitivity=sensitivity, seconds=np.array(seconds))
         os.replace(tmp, path)
 
     def state(self, muscle: str, k: int, level: int) -> MuscleState | None:
@@ -163,7 +176,8 @@ class ResponseTable:
         if not np.isfinite(col["tension"][k]):
             return None
         return MuscleState(float(self.lengths(muscle)[k]), float(self.levels[level]),
-                           col["displacement"][k].astype(float), float(col["tension"][k]), float(col["stiffness"][k]), 0.0)
+                           col["displacement"][k].astype(float), float(col["tension"][k]), float(col["stiffness"][k]), 0.0,
+                           sensitivity=col["sensitivity"][k].astype(float))
 
     def moment_table(self) -> MomentTable:
         """The tables' moments as a :class:`MomentTable` (unfinished columns NaN, ``done`` False)."""
@@ -179,7 +193,8 @@ class ResponseTable:
                     tension[m, :, j], stiffness[m, :, j] = col["tension"], col["stiffness"]
                     seconds[m][j] = float(col["seconds"])
         h = self.header
-        meta = {"model_hash": h["model_hash"], "profile": h["profile"], "forearm": h["forearm"], "column_seconds": seconds}
+        meta = {"model_hash": h["model_hash"], "profile": h["profile"], "forearm": h["forearm"],
+                "joint_limits_deg": h.get("joint_limits_deg"), "column_seconds": seconds}
         return MomentTable(self.angles_deg, self.levels, tension, stiffness, done, np.asarray(h["fine_deg"]),
                            np.asarray(h["fine_dL"]), np.asarray(h["fine_gravity"]), np.asarray(h["fine_joint"]), meta)
 

@@ -369,7 +369,9 @@ class ArmModel:
         states, g, dg = {}, 0.0, 0.0
         for muscle, a in zip(self.spec.ordered_muscles(), activations):
             L, dL, d2L = self.muscle_length(muscle, theta_deg)
-            state = self.units[muscle.name].solve(L, float(a), start[muscle.name], tracker and tracker.muscle(muscle.name))
+            # near corrections keep their start's slope (chord in theta: dg need not be exact)
+            state = self.units[muscle.name].solve(L, float(a), start[muscle.name], tracker and tracker.muscle(muscle.name),
+                                                  fresh_slope=False)
             states[muscle.name] = state
             g += state.tension * dL
             dg += state.stiffness * dL**2 + state.tension * d2L

@@ -43,6 +43,9 @@ class MuscleState:
     stiffness: float  # N/mm, dT/dL with the interior re-equilibrated (Schur complement)
     max_volume_change: float
     iterations: int = 0
+    # du/dL (n_nodes, 3) mm/mm at fixed activation, the interior re-equilibrated: the slope of
+    # the state along its length (cubic Hermite guesses between tabulated states); None if unknown
+    sensitivity: np.ndarray | None = None
 
 
 def line_rotation(d_ref: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -127,16 +130,21 @@ class MuscleUnit:
             finally:
                 self.solver.material = full
             F = self.assembler.deformation_gradient(u.ravel())
-            tension, stiffness = self._stiffness(u, 0.0)
-            self._rest = MuscleState(self.mesh_length, 0.0, u, tension, stiffness, float(np.abs(np.linalg.det(F) - 1).max()))
+            tension, stiffness, slope = self._stiffness(u, 0.0)
+            self._rest = MuscleState(self.mesh_length, 0.0, u, tension, stiffness, float(np.abs(np.linalg.det(F) - 1).max()),
+                                     sensitivity=slope)
         return self._rest
 
-    def solve(self, length: float, activation: float, start: MuscleState | None = None, progress=None) -> MuscleState:
+    def solve(self, length: float, activation: float, start: MuscleState | None = None, progress=None,
+              fresh_slope: bool = True) -> MuscleState:
         """Equilibrium at (length, activation), continued from ``start`` (default: the mesh pose).
 
         The insertion face moves from the start length to ``length`` while the activation
         moves along: the solver's load stepping is the continuation. ``progress(t)`` is called
         after every accepted load step (persival.model.progress); it changes nothing solved.
+        ``fresh_slope=False``: a state within ``small_step_mm`` of a start with known slope
+        keeps the start's stiffness and du/dL (a chord: the joint iteration's last corrections
+        need its tension, exact, but not a factorization for a derivative that barely moved).
         """
         if not np.isfinite(length) or length <= 0:
             raise ValueError(f"muscle {self.name!r}: length must be positive, got {length}")
@@ -144,8 +152,14 @@ class MuscleUnit:
         if start.length == length and start.activation == activation and np.isfinite(start.tension):
             return start  # already the equilibrium there (e.g. the joint iteration's first angle)
         near = abs(length - start.length) <= self.small_step_mm and activation == start.activation
-        # a start this near (the joint iteration's corrections) beats any interpolation of kept states
-        state = None if near else self._from_library(float(length), float(activation), progress)
+        # a start this near (the joint iteration's corrections) beats any interpolation of kept
+        # states; with its slope du/dL the first-order predictor needs no factorization of its own
+        if near and start.sensitivity is not None:
+            guess = start.displacement + (length - start.length) * start.sensitivity
+            state = self.solve_from_guess(float(length), float(activation), guess, progress, max_iterations=6,
+                                          slope_from=None if fresh_slope else start)
+        else:
+            state = None if near else self._from_library(float(length), float(activation), progress)
         if state is None:
             state = self._continue(float(length), float(activation), start, progress=progress)
         self._remember(state)
@@ -173,10 +187,11 @@ class MuscleUnit:
         return self.solve_from_guess(length, activation, (1.0 - w) * lo.displacement + w * hi.displacement, progress)
 
     def solve_from_guess(self, length: float, activation: float, guess: np.ndarray, progress=None,
-                         max_iterations: int = 12) -> MuscleState | None:
+                         max_iterations: int = 12, slope_from: MuscleState | None = None) -> MuscleState | None:
         """Plain Newton at (length, activation) from a guessed displacement (no load stepping);
         None if it does not converge within ``max_iterations``. The guess's insertion face is
         put where ``length`` puts it, so an interpolation of neighbouring states is a good guess.
+        ``slope_from``: take stiffness and du/dL from this nearby state (see :meth:`solve`).
         """
         self._insertion_face.start[:] = self._insertion_face.end[:] = (length - self.mesh_length) * self.direction
         options = self.solver.options
@@ -189,6 +204,11 @@ class MuscleUnit:
             return None
         finally:
             self.solver.options = options
+        if slope_from is not None:
+            # T = dPi/dL is the axial part of the insertion face's reaction (what _stiffness sums)
+            tension = float(self.direction @ solution.reactions["insertion"].force)
+            return MuscleState(length, activation, solution.displacement, tension, slope_from.stiffness,
+                               solution.max_volume_change, solution.statistics.iterations, slope_from.sensitivity)
         return self._state(length, activation, solution)
 
     def _remember(self, state: MuscleState) -> None:
@@ -237,17 +257,19 @@ class MuscleUnit:
         ) from failure
 
     def _state(self, length: float, activation: float, solution) -> MuscleState:
-        tension, stiffness = self._stiffness(solution.displacement, activation)
+        tension, stiffness, slope = self._stiffness(solution.displacement, activation)
         return MuscleState(
             length, activation, solution.displacement, tension, stiffness,
-            solution.max_volume_change, solution.statistics.iterations,
+            solution.max_volume_change, solution.statistics.iterations, slope,
         )
 
-    def _stiffness(self, displacement: np.ndarray, activation: float) -> tuple[float, float]:
-        """Tension dPi/dL and axial stiffness dT/dL = g.K.g - (K g)_f . K_ff^-1 (K g)_f."""
+    def _stiffness(self, displacement: np.ndarray, activation: float) -> tuple[float, float, np.ndarray]:
+        """Tension dPi/dL, axial stiffness dT/dL = g.K.g - (K g)_f . K_ff^-1 (K g)_f and the
+        sensitivity du/dL (n_nodes, 3) of the same solve."""
         per_cell = np.full(self.mesh.n_cells, activation)
         K, f = self.assembler.tangent(np.asarray(displacement).ravel(), self.material, per_cell)
-        return float(self._axial @ f), self.solver.condensed_stiffness(K, self._axial)
+        stiffness, slope = self.solver.condensed_response(K, self._axial)
+        return float(self._axial @ f), stiffness, slope.reshape(-1, 3)
 
     def positions(self, state: MuscleState, rotation: np.ndarray) -> np.ndarray:
         """World node positions of a state whose line of action is turned by ``rotation``."""

@@ -261,10 +261,19 @@ class QuasiStaticSolver:
         re-equilibrated: the Schur complement ``g.K.g - (K g)_f . K_ff^-1 (K g)_f``
         (K: the upper-triangle tangent of :meth:`tangent`, or of :meth:`Tet10Assembler.tangent`
         when there are no extra terms)."""
+        return self.condensed_response(K, g)[0]
+
+    def condensed_response(self, K: sp.csr_matrix, g: np.ndarray) -> tuple[float, np.ndarray]:
+        """:meth:`condensed_stiffness` and the equilibrium's sensitivity du/ds (n_dofs,) to a
+        motion ``s g`` of the constrained DOFs: g on them, ``-K_ff^-1 (K g)_f`` on the free
+        ones (the same solve, so it comes free; a first-order predictor of the next state)."""
         Kg = symmetric_matvec(K, g)
         self.linear_solver.factorize(self._free_upper(K))
         k_f = Kg[self.free]
-        return float(g @ Kg - k_f @ self.linear_solver.solve(k_f))
+        x = self.linear_solver.solve(k_f)
+        du = np.asarray(g, dtype=float).copy()
+        du[self.free] = -x
+        return float(g @ Kg - k_f @ x), du
 
     def _residual_norm(self, f, r_theta):
         norm = float(np.linalg.norm(f[self.free]))
@@ -294,7 +303,9 @@ class QuasiStaticSolver:
             self._apply_constraints(u, t, theta)
             if not use_secant:
                 jump = u - u_start
-                if np.any(jump):
+                # a start whose faces already sit where they go (up to the float32 rounding of a
+                # stored state) needs no predictor: it would cost a factorization for nothing
+                if np.abs(jump).max() > 1e-6 * (1.0 + np.abs(u_start).max()):
                     K, _ = self._assemble(u_start, activation, stats)
                     u[self.free] += self._factorize_and_solve(K, -symmetric_matvec(K, jump)[self.free], stats)
             return u, theta

@@ -1,4 +1,4 @@
-"""One interface for every surrogate (sparse grid, paper network, POD network).
+"""One interface for every surrogate (sparse grid, paper network, POD network, response tables).
 
 scikit-learn's convention: ``fit(dataset)`` returns the fitted surrogate, ``predict(alpha)``
 answers surface positions ``(n, N, 3)`` in mm for activations ``(n, 5)``, ``predict_angle``
@@ -38,11 +38,12 @@ class Surrogate(Protocol):
 def _kinds() -> dict:
     from persival.surrogate.network_surrogate import NetworkSurrogate
     from persival.surrogate.surface_surrogate import SurfaceSurrogate
+    from persival.surrogate.table_surrogate import ResponseTableSurrogate
 
-    return {"sparse-grid": SurfaceSurrogate, "network": NetworkSurrogate}
+    return {"sparse-grid": SurfaceSurrogate, "network": NetworkSurrogate, "response-table": ResponseTableSurrogate}
 
 
-KINDS = ("sparse-grid", "network")
+KINDS = ("sparse-grid", "network", "response-table")
 
 
 def load_surrogate(path: str | Path):

@@ -109,6 +109,11 @@ class MotionActivationModel:
         if not table.complete:
             raise ValueError(f"the moment table is unfinished ({int(table.done.sum())} of {table.done.size} columns)")
         lo, hi = table.finite_range_deg()
+        # motions stay within the joint's anatomical limits (the tables reach beyond them, for
+        # the static equilibria of strong co-contractions)
+        limits = table.meta.get("joint_limits_deg")
+        if limits is not None:
+            lo, hi = max(lo, limits[0]), min(hi, limits[1])
         theta = np.linspace(lo, hi, int(round((hi - lo) / theta_step_deg)) + 1)
         V = np.stack([table.level_moments(m, theta) for m in MUSCLES], axis=1)  # (nT, 5, J)
         m_min, m_max = V.min(axis=2).sum(axis=1), V.max(axis=2).sum(axis=1)
