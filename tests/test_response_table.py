@@ -99,6 +99,8 @@ def test_killed_build_resumes_without_recomputing(arm, tmp_path):
     assert table.done.sum() == 2 and table.done[1].all()  # brachialis only
     first = {j: table.column("brachialis", j) for j in (0, 1)}
     assert np.isfinite(first[1]["tension"]).all() and (first[1]["tension"] > first[0]["tension"]).all()
+    # every state has its slope, the one at the mesh pose (60 deg: the rest state) too
+    assert all(np.isfinite(first[j]["sensitivity"]).all() for j in (0, 1))
     kept = table.column_path("brachialis", 0).stat().st_mtime_ns
     table.column_path("brachialis", 1).unlink()  # the build was killed before its last column was written
     seen = []

@@ -102,9 +102,12 @@ class TableSolver:
                 continue
             col = self.table.column(muscle, jj)
             d, s = col["displacement"][k : k + 2], col["sensitivity"][k : k + 2]
-            if not (np.isfinite(d).all() and np.isfinite(s).all()):
+            if not np.isfinite(d).all():
                 return None
-            guess += weight * (basis[0] * d[0] + basis[1] * d[1] + basis[2] * s[0] + basis[3] * s[1])
+            if np.isfinite(s).all():
+                guess += weight * (basis[0] * d[0] + basis[1] * d[1] + basis[2] * s[0] + basis[3] * s[1])
+            else:  # a slope is missing: linear in length
+                guess += weight * ((1 - t) * d[0] + t * d[1])
         return MuscleState(float(L), float(activation), guess, float("nan"), float("nan"), 0.0)
 
     def nearest(self, muscle: str, theta_deg: float, activation: float) -> MuscleState:

@@ -150,6 +150,8 @@ class MuscleUnit:
             raise ValueError(f"muscle {self.name!r}: length must be positive, got {length}")
         start = start or self.rest_state(progress)
         if start.length == length and start.activation == activation and np.isfinite(start.tension):
+            if start.sensitivity is None:  # e.g. a rest state from an older cache: complete it
+                start = replace(start, sensitivity=self._stiffness(start.displacement, activation)[2])
             return start  # already the equilibrium there (e.g. the joint iteration's first angle)
         near = abs(length - start.length) <= self.small_step_mm and activation == start.activation
         # a start this near (the joint iteration's corrections) beats any interpolation of kept
