@@ -156,6 +156,20 @@ class ResponseTable:
                 self._columns[key] = {k: data[k] for k in data.files}
         return self._columns[key]
 
+    def column_summary(self, muscle: str, level: int) -> dict:
+        """tension, stiffness and seconds of a column, without decompressing its node arrays
+        (opening the tables for their moments reads every column: a warm ``simulate`` spent
+        seconds on the node arrays it never used)."""
+        if (muscle, level) in self._columns:
+            col = self._columns[(muscle, level)]
+        else:
+            col = np.load(self.column_path(muscle, level), allow_pickle=False)
+        try:
+            return {k: col[k] for k in ("tension", "stiffness", "seconds")}
+        finally:
+            if hasattr(col, "close"):
+                col.close()
+
     def write_column(self, muscle: str, level: int, sweep: dict, seconds: float) -> None:
         n = self.header["n_nodes"][muscle]
         displacement = np.full((len(self.angles_deg), n, 3), np.nan, dtype=np.float32)
@@ -189,7 +203,7 @@ class ResponseTable:
         for m, name in enumerate(MUSCLES):
             for j in range(n_a):
                 if done[m, j]:
-                    col = self.column(name, j)
+                    col = self.column_summary(name, j)
                     tension[m, :, j], stiffness[m, :, j] = col["tension"], col["stiffness"]
                     seconds[m][j] = float(col["seconds"])
         h = self.header
@@ -201,7 +215,7 @@ class ResponseTable:
     def build_seconds(self) -> float:
         """Sum of the finished columns' compute times (s)."""
         done = self.done
-        return float(sum(float(self.column(m, j)["seconds"]) for i, m in enumerate(MUSCLES)
+        return float(sum(float(self.column_summary(m, j)["seconds"]) for i, m in enumerate(MUSCLES)
                          for j in range(len(self.levels)) if done[i, j]))
 
 
