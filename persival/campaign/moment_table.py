@@ -55,24 +55,18 @@ def _next_state(unit, length: float, activation: float, state, previous):
     change smoothly with the length), else load-stepped continuation from the last.
 
     The extrapolation is the quadratic through the last state, its slope du/dL and the one
-    before (the tangent line when there is none before; the secant of the last two when the
-    slope is unknown). Why: a slack, bowed muscle shortened by 9 mm took 100 to 200 Newton
+    before (the tangent line when there is none before). Why: a slack, bowed muscle shortened by 9 mm took 100 to 200 Newton
     iterations by load stepping from the last state (coarse brachioradialis, profiled); from the
     extrapolated shape a few. The insertion face of the guess sits exactly at ``length`` (it is
     linear in L, and so is every extrapolation here).
     """
     step = length - state.length
-    guess = None
-    if state.sensitivity is not None and step != 0.0:
+    if step != 0.0:  # every MuscleUnit state carries its slope
         guess = state.displacement + step * state.sensitivity
         if previous is not None and previous.length != state.length:
             back = previous.length - state.length
             curvature = (previous.displacement - state.displacement - back * state.sensitivity) / back**2
             guess = guess + step**2 * curvature
-    elif previous is not None and state.length != previous.length and step != 0.0:
-        w = step / (state.length - previous.length)
-        guess = state.displacement + w * (state.displacement - previous.displacement)
-    if guess is not None:
         solved = unit.solve_from_guess(length, activation, guess, max_iterations=10)
         if solved is not None:
             return solved

@@ -160,15 +160,11 @@ class ResponseTable:
         """tension, stiffness and seconds of a column, without decompressing its node arrays
         (opening the tables for their moments reads every column: a warm ``simulate`` spent
         seconds on the node arrays it never used)."""
+        keys = ("tension", "stiffness", "seconds")
         if (muscle, level) in self._columns:
-            col = self._columns[(muscle, level)]
-        else:
-            col = np.load(self.column_path(muscle, level), allow_pickle=False)
-        try:
-            return {k: col[k] for k in ("tension", "stiffness", "seconds")}
-        finally:
-            if hasattr(col, "close"):
-                col.close()
+            return {k: self._columns[(muscle, level)][k] for k in keys}
+        with np.load(self.column_path(muscle, level), allow_pickle=False) as data:  # reads only these keys
+            return {k: data[k] for k in keys}
 
     def write_column(self, muscle: str, level: int, sweep: dict, seconds: float) -> None:
         n = self.header["n_nodes"][muscle]

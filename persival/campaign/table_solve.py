@@ -102,12 +102,9 @@ class TableSolver:
                 continue
             col = self.table.column(muscle, jj)
             d, s = col["displacement"][k : k + 2], col["sensitivity"][k : k + 2]
-            if not np.isfinite(d).all():
+            if not (np.isfinite(d).all() and np.isfinite(s).all()):
                 return None
-            if np.isfinite(s).all():
-                guess += weight * (basis[0] * d[0] + basis[1] * d[1] + basis[2] * s[0] + basis[3] * s[1])
-            else:  # a slope is missing: linear in length
-                guess += weight * ((1 - t) * d[0] + t * d[1])
+            guess += weight * (basis[0] * d[0] + basis[1] * d[1] + basis[2] * s[0] + basis[3] * s[1])
         return MuscleState(float(L), float(activation), guess, float("nan"), float("nan"), 0.0)
 
     def nearest(self, muscle: str, theta_deg: float, activation: float) -> MuscleState:
@@ -148,7 +145,7 @@ class TableSolver:
         hanging arm, as the direct solve from it)."""
         alpha = check_activation_vector(activations)
         t0 = time.perf_counter()
-        theta0 = self.equilibrium_angle(alpha, self._near(near_deg))
+        theta0 = self.start_angle(alpha, near_deg)
         starts, how = {}, {}
         for name, a in zip(MUSCLES, alpha):
             starts[name], how[name] = self.muscle_state(name, theta0, float(a))
@@ -162,11 +159,13 @@ class TableSolver:
     def interpolate(self, activations, near_deg: float | None = None) -> tuple[float, np.ndarray]:
         """The table-only path: (theta_0, world displacements (n_nodes, 3) of all muscles)."""
         alpha = check_activation_vector(activations)
-        theta0 = self.equilibrium_angle(alpha, self._near(near_deg))
+        theta0 = self.start_angle(alpha, near_deg)
         states = {name: self.guess(name, theta0, float(a)) or self.nearest(name, theta0, float(a))
                   for name, a in zip(MUSCLES, alpha)}
         return theta0, self.arm.displacement(states, theta0)
 
-    def _near(self, near_deg: float | None) -> float:
-        """The root to pick: by default the one the direct solve from the hanging arm finds."""
-        return self.arm.base_state().elbow_angle_deg if near_deg is None else near_deg
+    def start_angle(self, activations, near_deg: float | None = None) -> float:
+        """theta_0 of both paths: the tabulated balance's stable root nearest ``near_deg``, by
+        default the one the direct solve from the hanging arm finds."""
+        near = self.arm.base_state().elbow_angle_deg if near_deg is None else near_deg
+        return self.equilibrium_angle(activations, near)

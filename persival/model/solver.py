@@ -256,17 +256,13 @@ class QuasiStaticSolver:
         self.linear_solver.factorize(self._free_upper(K))
         return r_theta, float(k_tt - k_ft @ self.linear_solver.solve(k_ft))
 
-    def condensed_stiffness(self, K: sp.csr_matrix, g: np.ndarray) -> float:
-        """Stiffness along a motion ``g`` of the constrained DOFs with the free DOFs
-        re-equilibrated: the Schur complement ``g.K.g - (K g)_f . K_ff^-1 (K g)_f``
-        (K: the upper-triangle tangent of :meth:`tangent`, or of :meth:`Tet10Assembler.tangent`
-        when there are no extra terms)."""
-        return self.condensed_response(K, g)[0]
-
     def condensed_response(self, K: sp.csr_matrix, g: np.ndarray) -> tuple[float, np.ndarray]:
-        """:meth:`condensed_stiffness` and the equilibrium's sensitivity du/ds (n_dofs,) to a
-        motion ``s g`` of the constrained DOFs: g on them, ``-K_ff^-1 (K g)_f`` on the free
-        ones (the same solve, so it comes free; a first-order predictor of the next state)."""
+        """Stiffness along a motion ``s g`` of the constrained DOFs with the free DOFs
+        re-equilibrated, the Schur complement ``g.K.g - (K g)_f . K_ff^-1 (K g)_f``, and the
+        equilibrium's sensitivity du/ds (n_dofs,): g on the constrained DOFs, ``-K_ff^-1 (K g)_f``
+        on the free ones (the same solve, so it comes free; a first-order predictor of the next
+        state). K: the upper-triangle tangent of :meth:`tangent`, or of
+        :meth:`Tet10Assembler.tangent` when there are no extra terms."""
         Kg = symmetric_matvec(K, g)
         self.linear_solver.factorize(self._free_upper(K))
         k_f = Kg[self.free]

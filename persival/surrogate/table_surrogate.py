@@ -102,7 +102,7 @@ class ResponseTableSurrogate:
 
     def predict_angle(self, activations) -> np.ndarray:
         alpha = np.atleast_2d(np.asarray(activations, dtype=float))
-        return np.array([self.solver.equilibrium_angle(a, self.solver._near(None)) for a in alpha])
+        return np.array([self.solver.start_angle(a) for a in alpha])
 
     # ------------------------------------------------------------------ folder
     def save(self, path: str | Path) -> Path:
