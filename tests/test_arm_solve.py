@@ -161,6 +161,26 @@ def test_moment_curves_predict_the_hanging_arm(arm, states):
     assert np.all(curves["biceps"]["active_moment_Nmm"] > 5 * curves["biceps"]["passive_moment_Nmm"])
 
 
+def test_moment_arms_follow_the_line_of_action_and_are_checked_against_the_bands(arm, tmp_path):
+    """Without contact a muscle's FE moment arm M / T is its line of action's -dL/dtheta; the
+    band check reads it where the bands are, and the plot carries all four panels."""
+    from persival.evaluate.muscle_curves import MOMENT_ARM_BANDS_MM, band_check, moment_arms, muscle_curves, plot_curves
+
+    curves = muscle_curves(arm, np.array([80.0, 90.0, 100.0]))
+    arms = moment_arms(curves)
+    for name in ("biceps", "triceps"):
+        line = -curves[name]["dL_dtheta_mm_per_rad"]
+        assert np.abs(curves[name]["active_tension_N"]).min() > 1.0
+        np.testing.assert_allclose(arms[name], line, rtol=1e-9)
+    rows = band_check(curves)
+    assert len(rows) == len(MOMENT_ARM_BANDS_MM)
+    biceps_90 = rows[0]
+    assert biceps_90["angles_deg"] == [85.0, 95.0]
+    assert biceps_90["model_mm"][0] == pytest.approx(np.interp(85.0, [80.0, 90.0], arms["biceps"][:2]))
+    assert biceps_90["inside"] == (35.0 <= min(biceps_90["model_mm"]) and max(biceps_90["model_mm"]) <= 45.0)
+    assert plot_curves(curves, tmp_path / "curves.png").stat().st_size > 20_000
+
+
 def test_a_stalled_activation_jump_detours_through_the_taut_mesh_pose(arm, monkeypatch):
     unit = arm.units["brachialis"]
     slack = unit.mesh_length - 15.0

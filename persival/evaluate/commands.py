@@ -43,7 +43,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         from rich.progress import Progress
         from rich.table import Table
 
-        from persival.evaluate.muscle_curves import REPORTED_SETS, muscle_curves, plot_curves, predicted_equilibrium
+        from persival.evaluate.muscle_curves import REPORTED_SETS, band_check, muscle_curves, plot_curves, predicted_equilibrium
         from persival.model.arm import ArmModel
         from persival.model.arm_file import load_model_file
 
@@ -64,10 +64,21 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             predicted[label] = predicted_equilibrium(data, acts)
             table.add_row(label, f"{predicted[label]:.1f}")
         console.print(table)
+        bands = band_check(data)
+        arms = Table(title="moment arms (mm, flexion +) against the physiological bands")
+        for column in ("muscle", "angles (deg)", "band", "model", "inside"):
+            arms.add_column(column)
+        for row in bands:
+            low, high = row["band_mm"]
+            arms.add_row(row["muscle"], "{:g} to {:g}".format(*row["angles_deg"]),
+                         f"{low:g} to {high:g}" if high is not None else f">= {low:g}",
+                         "{:.1f} to {:.1f}".format(*row["model_mm"]), "yes" if row["inside"] else "[red]no[/red]")
+        console.print(arms)
         out.mkdir(parents=True, exist_ok=True)
         serial = {k: (v.tolist() if isinstance(v, np.ndarray) else {kk: vv.tolist() for kk, vv in v.items()})
                   for k, v in data.items()}
-        (out / "curves.json").write_text(json.dumps({"profile": profile, "curves": serial, "predicted_deg": predicted}, indent=1))
+        (out / "curves.json").write_text(json.dumps({"profile": profile, "curves": serial, "predicted_deg": predicted,
+                                                     "moment_arm_bands": bands}, indent=1))
         console.print(f"wrote {out / 'curves.json'} and {plot_curves({**data, 'profile': profile}, out / 'curves.png')}")
 
     @app.command()

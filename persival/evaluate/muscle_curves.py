@@ -77,29 +77,113 @@ REPORTED_SETS = {
 }
 
 
-def plot_curves(curves: dict, path: str | Path) -> Path:
-    """One panel of passive moments, one of active moments, with the external load."""
-    import matplotlib
+#: Physiological moment arms (mm, flexion positive) the model is calibrated against (issue 11,
+#: after Murray et al. 1995): (muscle, angle range in deg, lowest, highest; None: no upper bound).
+#: A range of None spans the joint's limits.
+MOMENT_ARM_BANDS_MM = (
+    ("biceps", (85.0, 95.0), 35.0, 45.0),
+    ("biceps", (135.0, 145.0), 25.0, None),
+    ("brachialis", (85.0, 95.0), 18.0, 30.0),
+    ("brachialis", (135.0, 145.0), 18.0, None),
+    ("brachioradialis", (90.0, 120.0), 45.0, 70.0),
+    ("triceps", None, -25.0, -15.0),
+    ("anconeus", None, -12.0, -5.0),
+)
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
+def moment_arms(curves: dict) -> dict[str, np.ndarray]:
+    """Each muscle's moment arm (mm, flexion +) from its active FE sweep, M / T; where the
+    tension is below 1 N (a slack muscle's M / T is noise) from the line of action, -dL/dtheta."""
+    out = {}
+    for name in MUSCLES:
+        c = curves[name]
+        T, M = np.asarray(c["active_tension_N"], float), np.asarray(c["active_moment_Nmm"], float)
+        line = -np.asarray(c["dL_dtheta_mm_per_rad"], float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out[name] = np.where(np.abs(T) > 1.0, M / T, line)
+    return out
+
+
+def band_check(curves: dict) -> list[dict]:
+    """Every band of MOMENT_ARM_BANDS_MM against the model: the moment arm's extremes over the
+    band's angles (sampled at the curves' angles, interpolated at the band's ends)."""
+    angles = np.asarray(curves["angles_deg"], float)
+    arms = moment_arms(curves)
+    rows = []
+    for name, span, low, high in MOMENT_ARM_BANDS_MM:
+        lo_deg, hi_deg = span if span is not None else (angles[0], angles[-1])
+        inside = np.concatenate([[lo_deg], angles[(angles > lo_deg) & (angles < hi_deg)], [hi_deg]])
+        values = np.interp(inside, angles, arms[name])
+        ok = bool(np.all(values >= low) and (high is None or np.all(values <= high)))
+        rows.append({"muscle": name, "angles_deg": [float(lo_deg), float(hi_deg)], "band_mm": [low, high],
+                     "model_mm": [float(values.min()), float(values.max())], "inside": ok})
+    return rows
+
+
+def _moment_panels(curves: dict, axes) -> None:
     angles = curves["angles_deg"]
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharex=True)
-    panels = ((axes[0], "passive_moment_Nmm", "passive (activation 0)"),
-              (axes[1], "active_moment_Nmm", "fully active (activation 1)"))
-    for ax, key, title in panels:
+    for ax, key, title in ((axes[0], "passive_moment_Nmm", "passive (activation 0)"),
+                           (axes[1], "active_moment_Nmm", "fully active (activation 1)")):
         for name in MUSCLES:
             ax.plot(angles, curves[name][key], marker="o", ms=3, label=name)
         ax.plot(angles, -curves["external_moment_Nmm"], "k--", label="gravity + joint (to overcome)")
         ax.axhline(0.0, color="0.6", lw=0.8)
         ax.set_title(title)
-        ax.set_xlabel("elbow angle (deg)")
+        ax.set_ylabel("moment about the elbow (N mm, flexion +)")
+
+
+def _moment_arm_panel(curves: dict, ax) -> None:
+    angles = np.asarray(curves["angles_deg"], float)
+    arms = moment_arms(curves)
+    colours = {name: f"C{i}" for i, name in enumerate(MUSCLES)}
+    top, bottom = 80.0, -40.0
+    for name, span, low, high in MOMENT_ARM_BANDS_MM:  # behind the curves
+        lo_deg, hi_deg = span if span is not None else (angles[0], angles[-1])
+        ax.fill_between([lo_deg, hi_deg], low, top if high is None else high, color=colours[name], alpha=0.15, lw=0)
+    for name in MUSCLES:
+        ax.plot(angles, arms[name], marker="o", ms=3, color=colours[name], label=name)
+    ax.axhline(0.0, color="0.6", lw=0.8)
+    ax.set_ylim(bottom, top)
+    ax.set_title("moment arm M / T (shaded: physiological bands, Murray et al. 1995)")
+    ax.set_ylabel("moment arm (mm, flexion +)")
+
+
+def _strength_panel(curves: dict, ax) -> None:
+    """All flexors at 1 (extensors passive) and all extensors at 1 (flexors passive)."""
+    angles = curves["angles_deg"]
+    flexors, extensors = ("biceps", "brachialis", "brachioradialis"), ("triceps", "anconeus")
+
+    def total(active):
+        return sum(curves[n]["active_moment_Nmm" if n in active else "passive_moment_Nmm"] for n in MUSCLES)
+
+    ax.plot(angles, total(flexors), "C3", marker="o", ms=3, label="flexors at 1")
+    ax.plot(angles, total(extensors), "C0", marker="o", ms=3, label="extensors at 1")
+    ax.plot(angles, -curves["external_moment_Nmm"], "k--", label="gravity + joint (to overcome)")
+    ax.axhline(0.0, color="0.6", lw=0.8)
+    ax.set_title("maximal flexion and extension moment")
+    ax.set_ylabel("moment about the elbow (N mm, flexion +)")
+    ax.legend(fontsize=8)
+
+
+def plot_curves(curves: dict, path: str | Path) -> Path:
+    """Four panels: passive and active moments with the external load, moment arms with the
+    physiological bands behind, and the maximal flexion and extension moments."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(13, 9), sharex=True)
+    _moment_panels(curves, axes[0])
+    _moment_arm_panel(curves, axes[1, 0])
+    _strength_panel(curves, axes[1, 1])
+    for ax in axes.ravel():
         ax.grid(alpha=0.3)
-    axes[0].set_ylabel("moment about the elbow (N mm, flexion +)")
+    for ax in axes[1]:
+        ax.set_xlabel("elbow angle (deg)")
     # beside the panels: inside, the legend covered the curves of the real sweeps
-    axes[1].legend(fontsize=8, loc="center left", bbox_to_anchor=(1.02, 0.5))
+    axes[0, 1].legend(fontsize=8, loc="center left", bbox_to_anchor=(1.02, 0.5))
     profile = f" ({curves['profile']} profile)" if curves.get("profile") else ""
-    fig.suptitle(f"FE arm{profile}: each muscle's moment, swept alone along the elbow angle", fontsize=10)
+    fig.suptitle(f"FE arm{profile}: each muscle swept alone along the elbow angle", fontsize=10)
     fig.tight_layout()
     return save_figure(fig, path, dpi=120)

@@ -259,7 +259,12 @@ class MuscleUnit:
         ) from failure
 
     def _state(self, length: float, activation: float, solution) -> MuscleState:
-        tension, stiffness, slope = self._stiffness(solution.displacement, activation)
+        if solution.tangent is not None:  # the converged tangent, preconditioned by the last factorization
+            tension = float(self.direction @ solution.reactions["insertion"].force)
+            stiffness, slope = self.solver.condensed_response(solution.tangent, self._axial, reuse_factorization=True)
+            slope = slope.reshape(-1, 3)
+        else:
+            tension, stiffness, slope = self._stiffness(solution.displacement, activation)
         return MuscleState(
             length, activation, solution.displacement, tension, stiffness,
             solution.max_volume_change, solution.statistics.iterations, slope,

@@ -84,6 +84,9 @@ class StaticSolution:
     max_volume_change: float  # max |det F - 1| over quadrature points
     hinge_angle_deg: float | None = None  # the free hinge's equilibrium angle
     hinge_moment_residual: float = 0.0  # N mm: muscles + external moment at convergence
+    # upper-triangle tangent at ``displacement`` (None when no Newton step assembled one); the
+    # solver's factorization is then of a tangent one Newton step away (condensed_response reuses it)
+    tangent: sp.csr_matrix | None = None
 
 
 class QuasiStaticSolver:
@@ -152,6 +155,7 @@ class QuasiStaticSolver:
         self._ff_indices = cols_ff.astype(np.int32)
         self.linear_solver = SparseSymmetricSolver(self.options.backend)
         self._K_ff: sp.csr_matrix | None = None
+        self._factor_is_recent = False  # the factorization is of a tangent of the current solve
         self._moment_offset = self._initial_moment_residual = 0.0
         if self.hinge is not None:
             # length that turns the hinge moment into a force for the combined residual norm
@@ -227,6 +231,7 @@ class QuasiStaticSolver:
         stats.time_factorization += t1 - t0
         stats.time_solve += time.perf_counter() - t1
         stats.n_factorizations += 1
+        self._factor_is_recent = True
         return x
 
     def _hinge_terms(self, u, theta, K=None, f=None):
@@ -256,20 +261,42 @@ class QuasiStaticSolver:
         self.linear_solver.factorize(self._free_upper(K))
         return r_theta, float(k_tt - k_ft @ self.linear_solver.solve(k_ft))
 
-    def condensed_response(self, K: sp.csr_matrix, g: np.ndarray) -> tuple[float, np.ndarray]:
+    def condensed_response(self, K: sp.csr_matrix, g: np.ndarray, reuse_factorization: bool = False
+                           ) -> tuple[float, np.ndarray]:
         """Stiffness along a motion ``s g`` of the constrained DOFs with the free DOFs
         re-equilibrated, the Schur complement ``g.K.g - (K g)_f . K_ff^-1 (K g)_f``, and the
         equilibrium's sensitivity du/ds (n_dofs,): g on the constrained DOFs, ``-K_ff^-1 (K g)_f``
         on the free ones (the same solve, so it comes free; a first-order predictor of the next
         state). K: the upper-triangle tangent of :meth:`tangent`, or of
-        :meth:`Tet10Assembler.tangent` when there are no extra terms."""
+        :meth:`Tet10Assembler.tangent` when there are no extra terms.
+
+        ``reuse_factorization``: K is the ``tangent`` of the solution this solver just returned,
+        so its last factorization is of the tangent one converged Newton step earlier; that one
+        preconditions a few steps of iterative refinement against K instead of a factorization
+        of its own (the biceps of the quick mesh: 0.10 s per factorization, 0.03 s per solve).
+        Falls back to factorizing when the refinement stalls."""
         Kg = symmetric_matvec(K, g)
-        self.linear_solver.factorize(self._free_upper(K))
         k_f = Kg[self.free]
-        x = self.linear_solver.solve(k_f)
+        x = self._refined_solve(K, k_f) if reuse_factorization and self._factor_is_recent else None
+        if x is None:
+            self.linear_solver.factorize(self._free_upper(K))
+            x = self.linear_solver.solve(k_f)
         du = np.asarray(g, dtype=float).copy()
         du[self.free] = -x
         return float(g @ Kg - k_f @ x), du
+
+    def _refined_solve(self, K: sp.csr_matrix, b: np.ndarray, rtol: float = 1e-10, steps: int = 4) -> np.ndarray | None:
+        """K_ff x = b by iterative refinement on the current (nearby) factorization; None if it
+        does not reach ``rtol`` within ``steps`` corrections."""
+        A = self._free_upper(K)  # only the matrix data: the factorization stays as it was
+        x = self.linear_solver.solve(b)
+        target = rtol * float(np.linalg.norm(b))
+        for _ in range(steps):
+            r = b - symmetric_matvec(A, x)
+            if float(np.linalg.norm(r)) <= target:
+                return x
+            x = x + self.linear_solver.solve(r)
+        return None
 
     def _residual_norm(self, f, r_theta):
         norm = float(np.linalg.norm(f[self.free]))
@@ -411,6 +438,8 @@ class QuasiStaticSolver:
             if not np.isfinite(theta):
                 raise ValueError("initial_angle must be finite")
         stats = NewtonStatistics()
+        self._factor_is_recent = False
+        tangent = None
         wall = time.perf_counter()
         opts = self.options
         self._moment_offset = self._initial_moment_residual = 0.0
@@ -433,7 +462,7 @@ class QuasiStaticSolver:
             act = start + t_new * (target - start)
             secant = None if rate is None else ((t_new - t) * rate[0], (t_new - t) * rate[1])
             try:
-                u_new, theta_new, _, f, history = self._newton_step(u, theta, t_new, act, stats, secant)
+                u_new, theta_new, tangent, f, history = self._newton_step(u, theta, t_new, act, stats, secant)
             except (ConvergenceError, InvertedElementError, SingularMatrixError) as exc:
                 log.debug("step t=%.4f -> %.4f failed (%s); halving", t, t_new, exc)
                 stats.step_cuts += 1
@@ -463,6 +492,7 @@ class QuasiStaticSolver:
             max_volume_change=float(np.abs(np.linalg.det(self.assembler.deformation_gradient(u)) - 1.0).max()),
             hinge_angle_deg=theta,
             hinge_moment_residual=r_theta,
+            tangent=tangent if self._factor_is_recent else None,
         )
 
     def _validated_activation(self, activation, name) -> np.ndarray:
