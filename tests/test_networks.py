@@ -29,6 +29,22 @@ def test_pod_basis_is_orthonormal_and_ordered():
     np.testing.assert_allclose(mean + coef @ basis, u.reshape(40, -1), atol=1e-9)
 
 
+def test_randomized_pod_matches_the_gram_route():
+    """With a cap far below the sample count the modes come from randomized subspace iteration;
+    on snapshots with a decaying spectrum they span the Gram route's modes to rounding."""
+    rng = np.random.default_rng(1)
+    n, m = 400, 900
+    spectrum = 10.0 ** -np.linspace(0, 6, 60)
+    u = ((rng.normal(size=(n, 60)) * spectrum) @ np.linalg.qr(rng.normal(size=(m, 60)))[0].T).reshape(n, -1, 3)
+    mean, exact, s_exact = pod_basis(u, energy=1 - 1e-5)  # no cap: the Gram route
+    _, fast, s_fast = pod_basis(u, energy=1 - 1e-5, max_rank=40)
+    assert len(fast) == len(exact) < 40
+    np.testing.assert_allclose(s_fast, s_exact[: len(fast)], rtol=1e-8)
+    np.testing.assert_allclose(fast.T @ fast, exact.T @ exact, atol=1e-8)  # the same projector
+    capped = pod_basis(u, energy=1 - 1e-12, max_rank=12)[1]
+    assert len(capped) == 12
+
+
 def test_networks_beat_the_mean_and_fold_the_reference_into_the_graph(small_run):
     from persival.surrogate.base import load_surrogate
     from persival.surrogate.dataset import Dataset

@@ -54,9 +54,9 @@ class TrainingConfig:
 def choose_rank(u: np.ndarray, config: TrainingConfig):
     """(rank, (mean, basis)): the smallest rank keeping ``energy`` of the displacement
     fluctuations, at most ``max_rank`` (or ``config.rank``), and the POD itself."""
-    mean, basis, _ = pod_basis(u, rank=config.rank, energy=config.energy)
-    rank = min(len(basis), config.max_rank) if config.rank is None else len(basis)
-    return int(rank), (mean, basis[:rank])
+    mean, basis, _ = pod_basis(u, rank=config.rank, energy=config.energy,
+                               max_rank=None if config.rank is not None else config.max_rank)
+    return len(basis), (mean, basis)
 
 
 def build_net(config: TrainingConfig, n_nodes: int, rank: int | None = None):
@@ -93,11 +93,16 @@ def _epoch(net, optimizer, x, y, batch: int, generator) -> float:
 
 
 @torch.no_grad()
-def _validate(net, x, y, u) -> tuple[float, list[float]]:
+def _validate(net, x, y, u, chunk: int = 128) -> tuple[float, list[float]]:
     net.eval()
     out = net(x)
     loss = float(torch.mean((net.physical(out) - y) ** 2))
-    mae = torch.mean(torch.abs(net.displacements(out) - u), dim=(0, 1))  # per coordinate, mm
+    # the displacements in chunks: whole, four (n, 3N) temporaries a validation (75 MB each for
+    # the main job's POD net) cost more than its training epoch
+    total = torch.zeros(3, dtype=torch.float64)
+    for rows in torch.arange(len(x)).split(chunk):
+        total += torch.abs(net.displacements(out[rows]) - u[rows]).sum(dim=(0, 1), dtype=torch.float64)
+    mae = total / (len(x) * u.shape[1])  # per coordinate, mm
     return loss, [float(v) for v in mae]
 
 
@@ -133,11 +138,13 @@ def train(dataset, config: TrainingConfig, out: str | Path, progress=None):
             net.load_state_dict(state["net"])
             optimizer.load_state_dict(state["optimizer"])
             schedule.load_state_dict(state["schedule"])
+        x_train, y_train = x[train_rows], y[train_rows]
+        x_val, y_val, u_val = x[val_rows], y[val_rows], ut[val_rows]  # once a fold, not every epoch
         while state["epoch"] < config.epochs:
             t0 = time.perf_counter()
-            train_loss = _epoch(net, optimizer, x[train_rows], y[train_rows], config.batch_size, generator)
+            train_loss = _epoch(net, optimizer, x_train, y_train, config.batch_size, generator)
             schedule.step()
-            val_loss, mae = _validate(net, x[val_rows], y[val_rows], ut[val_rows])
+            val_loss, mae = _validate(net, x_val, y_val, u_val)
             state["epoch"] += 1
             state["history"].append({"fold": state["fold"], "epoch": state["epoch"], "train_loss": train_loss,
                                      "val_loss": val_loss, "val_mae_mm": mae})
