@@ -163,21 +163,25 @@ def test_moment_curves_predict_the_hanging_arm(arm, states):
 
 def test_moment_arms_follow_the_line_of_action_and_are_checked_against_the_bands(arm, tmp_path):
     """Without contact a muscle's FE moment arm M / T is its line of action's -dL/dtheta; the
-    band check reads it where the bands are, and the plot carries all four panels."""
+    band check reads it where the bands are, and the plot carries all four panels. (Brachialis
+    and triceps: on the coarse mesh the biceps' isometric activation stalls unless an earlier
+    solve left it a start, see test_a_stalled_activation_jump_detours_through_the_taut_mesh_pose.)"""
     from persival.evaluate.muscle_curves import MOMENT_ARM_BANDS_MM, band_check, moment_arms, muscle_curves, plot_curves
 
-    curves = muscle_curves(arm, np.array([80.0, 90.0, 100.0]))
+    angles = np.array([60.0, 90.0, 120.0])
+    curves = muscle_curves(arm, angles)
     arms = moment_arms(curves)
-    for name in ("biceps", "triceps"):
-        line = -curves[name]["dL_dtheta_mm_per_rad"]
+    for name in ("brachialis", "triceps"):
         assert np.abs(curves[name]["active_tension_N"]).min() > 1.0
-        np.testing.assert_allclose(arms[name], line, rtol=1e-9)
+        np.testing.assert_allclose(arms[name], -curves[name]["dL_dtheta_mm_per_rad"], rtol=1e-9)
     rows = band_check(curves)
     assert len(rows) == len(MOMENT_ARM_BANDS_MM)
-    biceps_90 = rows[0]
-    assert biceps_90["angles_deg"] == [85.0, 95.0]
-    assert biceps_90["model_mm"][0] == pytest.approx(np.interp(85.0, [80.0, 90.0], arms["biceps"][:2]))
-    assert biceps_90["inside"] == (35.0 <= min(biceps_90["model_mm"]) and max(biceps_90["model_mm"]) <= 45.0)
+    brachialis_90 = next(r for r in rows if r["muscle"] == "brachialis" and r["angles_deg"] == [85.0, 95.0])
+    expected = np.interp([85.0, 90.0, 95.0], angles, arms["brachialis"])
+    np.testing.assert_allclose(brachialis_90["model_mm"], [expected.min(), expected.max()])
+    assert brachialis_90["inside"] == bool(expected.min() >= 18.0 and expected.max() <= 30.0)
+    failed = {**curves, "biceps": {**curves["biceps"], "active_tension_N": np.full(3, np.nan)}}
+    assert np.isnan(moment_arms(failed)["biceps"]).all() and band_check(failed)[0]["inside"] is None
     assert plot_curves(curves, tmp_path / "curves.png").stat().st_size > 20_000
 
 

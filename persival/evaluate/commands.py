@@ -72,7 +72,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             low, high = row["band_mm"]
             arms.add_row(row["muscle"], "{:g} to {:g}".format(*row["angles_deg"]),
                          f"{low:g} to {high:g}" if high is not None else f">= {low:g}",
-                         "{:.1f} to {:.1f}".format(*row["model_mm"]), "yes" if row["inside"] else "[red]no[/red]")
+                         "{:.1f} to {:.1f}".format(*row["model_mm"]),
+                         {True: "yes", False: "[red]no[/red]", None: "not solved"}[row["inside"]])
         console.print(arms)
         out.mkdir(parents=True, exist_ok=True)
         serial = {k: (v.tolist() if isinstance(v, np.ndarray) else {kk: vv.tolist() for kk, vv in v.items()})

@@ -93,20 +93,22 @@ MOMENT_ARM_BANDS_MM = (
 
 def moment_arms(curves: dict) -> dict[str, np.ndarray]:
     """Each muscle's moment arm (mm, flexion +) from its active FE sweep, M / T; where the
-    tension is below 1 N (a slack muscle's M / T is noise) from the line of action, -dL/dtheta."""
+    tension is below 1 N (a slack muscle's M / T is noise) from the line of action, -dL/dtheta;
+    NaN where the sweep did not converge."""
     out = {}
     for name in MUSCLES:
         c = curves[name]
         T, M = np.asarray(c["active_tension_N"], float), np.asarray(c["active_moment_Nmm"], float)
         line = -np.asarray(c["dL_dtheta_mm_per_rad"], float)
         with np.errstate(divide="ignore", invalid="ignore"):
-            out[name] = np.where(np.abs(T) > 1.0, M / T, line)
+            out[name] = np.where(np.isnan(T), np.nan, np.where(np.abs(T) > 1.0, M / T, line))
     return out
 
 
 def band_check(curves: dict) -> list[dict]:
     """Every band of MOMENT_ARM_BANDS_MM against the model: the moment arm's extremes over the
-    band's angles (sampled at the curves' angles, interpolated at the band's ends)."""
+    band's angles (sampled at the curves' angles, interpolated at the band's ends); ``inside``
+    is None where a sweep there did not converge."""
     angles = np.asarray(curves["angles_deg"], float)
     arms = moment_arms(curves)
     rows = []
@@ -114,7 +116,7 @@ def band_check(curves: dict) -> list[dict]:
         lo_deg, hi_deg = span if span is not None else (angles[0], angles[-1])
         inside = np.concatenate([[lo_deg], angles[(angles > lo_deg) & (angles < hi_deg)], [hi_deg]])
         values = np.interp(inside, angles, arms[name])
-        ok = bool(np.all(values >= low) and (high is None or np.all(values <= high)))
+        ok = None if np.isnan(values).any() else bool(np.all(values >= low) and (high is None or np.all(values <= high)))
         rows.append({"muscle": name, "angles_deg": [float(lo_deg), float(hi_deg)], "band_mm": [low, high],
                      "model_mm": [float(values.min()), float(values.max())], "inside": ok})
     return rows
