@@ -207,9 +207,7 @@ class MuscleUnit:
         finally:
             self.solver.options = options
         if slope_from is not None:
-            # T = dPi/dL is the axial part of the insertion face's reaction (what _stiffness sums)
-            tension = float(self.direction @ solution.reactions["insertion"].force)
-            return MuscleState(length, activation, solution.displacement, tension, slope_from.stiffness,
+            return MuscleState(length, activation, solution.displacement, self._tension(solution), slope_from.stiffness,
                                solution.max_volume_change, solution.statistics.iterations, slope_from.sensitivity)
         return self._state(length, activation, solution)
 
@@ -260,7 +258,7 @@ class MuscleUnit:
 
     def _state(self, length: float, activation: float, solution) -> MuscleState:
         if solution.tangent is not None:  # the converged tangent, preconditioned by the last factorization
-            tension = float(self.direction @ solution.reactions["insertion"].force)
+            tension = self._tension(solution)
             stiffness, slope = self.solver.condensed_response(solution.tangent, self._axial, reuse_factorization=True)
             slope = slope.reshape(-1, 3)
         else:
@@ -269,6 +267,10 @@ class MuscleUnit:
             length, activation, solution.displacement, tension, stiffness,
             solution.max_volume_change, solution.statistics.iterations, slope,
         )
+
+    def _tension(self, solution) -> float:
+        """T = dPi/dL: the axial part of the insertion face's reaction (what _stiffness sums)."""
+        return float(self.direction @ solution.reactions["insertion"].force)
 
     def _stiffness(self, displacement: np.ndarray, activation: float) -> tuple[float, float, np.ndarray]:
         """Tension dPi/dL, axial stiffness dT/dL = g.K.g - (K g)_f . K_ff^-1 (K g)_f and the

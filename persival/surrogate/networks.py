@@ -124,7 +124,7 @@ def pod_basis(displacements: np.ndarray, rank: int | None = None, energy: float 
         s = np.sqrt(w)
         modes = None
     if rank is None:
-        captured = np.cumsum(s**2) / max(float(np.sum(centred**2)), 1e-300)
+        captured = np.cumsum(s**2) / max(float(np.vdot(centred, centred)), 1e-300)  # no (n, 3N) temporary
         rank = int(np.searchsorted(captured, energy) + 1)
         rank = rank if max_rank is None else min(rank, max_rank)
     rank = int(min(rank, int(np.sum(s > s[0] * 1e-10)), len(s)))
