@@ -149,6 +149,24 @@ def test_rest_state_comes_from_the_cache_the_second_time(arm):
     assert second.statistics["iterations"] <= 10  # at most a Newton iteration or two per muscle
 
 
+def test_hanging_arm_from_the_tables_is_the_direct_one(arm, solver, tmp_path, monkeypatch):
+    """ensure_tables caches the rest states first (the table workers need them), then the hanging
+    arm by the tables' exact path: the same FE equilibrium as the continuation from the mesh poses."""
+    from persival.campaign.arm_simulator import hanging_from_tables
+
+    direct = arm.base_state()
+    monkeypatch.setenv("PERSIVAL_CACHE", str(tmp_path))
+    fresh = ArmModel(profile="coarse")
+    fresh.rest_states()
+    assert fresh.load_cached_rest_states() and fresh._cached_base() is None  # rest states only, no hanging arm yet
+    state = hanging_from_tables(fresh, solver.table)
+    assert abs(state.elbow_angle_deg - direct.elbow_angle_deg) < 1e-4
+    assert np.abs(state.displacement - direct.displacement).max() < 1e-3
+    assert abs(state.moment_residual) <= arm.options.moment_atol
+    again = ArmModel(profile="coarse").base_state()
+    assert again.statistics["from_cache"] and abs(again.elbow_angle_deg - state.elbow_angle_deg) < 1e-6
+
+
 def test_sensitivity_is_the_slope_of_the_equilibrium(arm):
     """du/dL from the condensed solve equals the finite-difference slope of two equilibria."""
     unit = arm.units["brachialis"]

@@ -15,6 +15,7 @@ from persival.campaign.simulator import ReferenceGeometry, SimulationResult, Sur
 from persival.model.arm import ArmModel, ArmState
 from persival.model.mesh import Tet10Mesh
 from persival.model.output import muscle_submesh
+from persival.model.solver import ConvergenceError
 from persival.vocabulary import MUSCLES
 
 
@@ -136,10 +137,29 @@ def ensure_tables(model_file=None, profile: str = "quick", tables: str | None = 
     from persival.campaign.response_table import DEFAULT_ANGLES, DEFAULT_LEVELS, build_response_table
 
     arm = ArmModel(model_file, profile)
-    arm.base_state()  # cached: the table workers read each muscle's rest state from it
-    return build_response_table(arm, tables, DEFAULT_ANGLES if angles is None else angles,
-                                DEFAULT_LEVELS if levels is None else levels, model_file=model_file, scheduler=scheduler,
-                                n_workers=n_workers, progress=progress)
+    arm.rest_states()  # cached: the table workers read each muscle's rest state from it
+    table = build_response_table(arm, tables, DEFAULT_ANGLES if angles is None else angles,
+                                 DEFAULT_LEVELS if levels is None else levels, model_file=model_file, scheduler=scheduler,
+                                 n_workers=n_workers, progress=progress)
+    if arm._cached_base() is None:
+        hanging_from_tables(arm, table)
+    return table
+
+
+def hanging_from_tables(arm, table):
+    """The hanging arm (activations 0) by the tables' exact path, kept in the state cache: a
+    converged FE equilibrium in seconds, where the continuation from the mesh poses took 80 s
+    (quick mesh; the a = 0 column already holds every muscle near where it hangs)."""
+    from persival.campaign.table_solve import OutsideTableError, TableSolver
+
+    if not table.complete:
+        return None
+    try:
+        state = TableSolver(arm, table).solve(np.zeros(5), near_deg=arm.start_angle_deg)
+    except (ConvergenceError, OutsideTableError):
+        return None  # base_state solves it directly when first asked
+    arm.adopt_base_state(state)
+    return state
 
 
 def prepare_spec(spec, progress=None, scheduler: str | None = None, n_workers: int | None = None):

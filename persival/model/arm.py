@@ -250,7 +250,9 @@ class ArmModel:
 
         With ``cache`` it is read from the on-disk cache of this model and mesh when there
         (:mod:`persival.model.state_cache`; the joint equilibrium is re-converged from it, one
-        Newton iteration per muscle) and written there after a fresh solve.
+        Newton iteration per muscle) and written there after a fresh solve. A hanging arm
+        solved elsewhere (from the response tables, in seconds instead of 80 s of continuation
+        from the mesh poses) is put there by :meth:`adopt_base_state`.
         ``statistics["from_cache"]`` says which happened.
         """
         if self._base is None:
@@ -262,18 +264,47 @@ class ArmModel:
                 state = self._equilibrium(np.zeros(5), start, angle, SolveTracker(progress, "cached rest state"))
             else:
                 tracker = SolveTracker(progress, "rest state")
-                rest = {name: unit.rest_state(tracker.muscle(name)) for name, unit in self.units.items()}
+                rest = self.rest_states(tracker, cache=cache)
                 tracker.phase = "joint equilibrium"
                 state = self._equilibrium(np.zeros(5), rest, self.start_angle_deg, tracker)
                 if cache:
-                    save_states(self.cache_dir() / "rest_state.npz",
-                                {"groups": ["rest", "hanging"], "elbow_angle_deg": state.elbow_angle_deg,
-                                 "model_hash": self.model_hash, "profile": self.profile},
-                                {"rest": rest, "hanging": state.muscle_states})
+                    self._save_cache(state)
             state.statistics["from_cache"] = cached is not None
             state.wall_time_s = time.perf_counter() - t0
             self._base = state
         return self._base
+
+    def rest_states(self, tracker: SolveTracker | None = None, cache: bool = True) -> dict[str, MuscleState]:
+        """Every muscle's passive equilibrium at its mesh length (the prestretch switched on,
+        SPEC 3.3): from the state cache when there, else solved (20 s on the quick mesh) and,
+        with ``cache``, written there without a hanging arm yet."""
+        loaded = self._cached_groups() if cache else None
+        if loaded is not None:
+            self._set_rest_states(loaded[1]["rest"])
+        else:
+            tracker = tracker or SolveTracker(None, "rest state")
+            rest = {name: unit.rest_state(tracker.muscle(name)) for name, unit in self.units.items()}
+            if cache:
+                save_states(self.cache_dir() / "rest_state.npz",
+                            {"groups": ["rest"], "model_hash": self.model_hash, "profile": self.profile}, {"rest": rest})
+        return {name: unit.rest_state() for name, unit in self.units.items()}
+
+    def adopt_base_state(self, state: ArmState, cache: bool = True) -> None:
+        """Take ``state`` (activations 0, a converged FE equilibrium) as the hanging arm, and
+        with ``cache`` keep it in the state cache beside the rest states."""
+        if np.any(state.activations):
+            raise ValueError(f"the hanging arm has activations 0, not {list(state.activations)}")
+        self.rest_states(cache=cache)
+        self._base = state
+        if cache:
+            self._save_cache(state)
+
+    def _save_cache(self, hanging: ArmState) -> None:
+        rest = {name: unit.rest_state() for name, unit in self.units.items()}
+        save_states(self.cache_dir() / "rest_state.npz",
+                    {"groups": ["rest", "hanging"], "elbow_angle_deg": hanging.elbow_angle_deg,
+                     "model_hash": self.model_hash, "profile": self.profile},
+                    {"rest": rest, "hanging": hanging.muscle_states})
 
     def cache_dir(self) -> Path:
         """This model's and mesh's folder of the state cache (persival.model.state_cache)."""
@@ -281,22 +312,27 @@ class ArmModel:
 
     def load_cached_rest_states(self) -> bool:
         """Give every muscle its rest state from the state cache, if there; True if it was."""
-        cached = self._cached_base()
-        if cached is not None:
-            self._set_rest_states(cached[0])
-        return cached is not None
+        loaded = self._cached_groups()
+        if loaded is not None:
+            self._set_rest_states(loaded[1]["rest"])
+        return loaded is not None
 
     def _set_rest_states(self, rest: dict[str, MuscleState]) -> None:
         for name, unit in self.units.items():
             unit._rest = rest[name]
 
-    def _cached_base(self):
+    def _cached_groups(self):
+        """(header, {group: {muscle: state}}) of this model's cache file, or None."""
         loaded = load_states(self.cache_dir() / "rest_state.npz", list(self.units))
-        if loaded is None:
+        if loaded is None or loaded[0].get("model_hash") != self.model_hash or "rest" not in loaded[1]:
+            return None
+        return loaded
+
+    def _cached_base(self):
+        loaded = self._cached_groups()
+        if loaded is None or "hanging" not in loaded[1]:
             return None
         header, groups = loaded
-        if header.get("model_hash") != self.model_hash:
-            return None
         # tension NaN: the states are re-converged (checked) by Newton, not taken as solved
         hanging = {name: replace(s, tension=float("nan")) for name, s in groups["hanging"].items()}
         return groups["rest"], hanging, float(header["elbow_angle_deg"])
