@@ -1,11 +1,11 @@
-"""The built-in upper-limb model: five tet10 muscles, rigid bones, elbow angle from equilibrium.
+"""The built-in upper-limb model's equilibria: five tet10 muscles, elbow angle from the moment balance.
 
-SPEC 3.3. Each muscle is a swept solid meshed stress free in its own pose; its origin face
-is fixed to the humerus, its insertion face is tied to the forearm, which rotates about the
-elbow hinge. The unknowns are the muscle displacements and the elbow angle theta; theta's
-equation is the moment balance about the hinge of the insertion forces, gravity on forearm
-plus hand and a passive joint moment that stiffens beyond the anatomical limits. Muscles do
-not touch each other or the bones (no contact, unlike the paper's mortar contact).
+SPEC 3.3. Each muscle's origin face is fixed to the humerus, its insertion face is tied to the
+forearm, which rotates about the elbow hinge (mesh, kinematics and the hinge's external loads:
+:mod:`persival.model.arm_body`). The unknowns are the muscle displacements and the elbow angle
+theta; theta's equation is the moment balance about the hinge of the insertion forces, gravity
+and the passive joint moment. Muscles do not touch each other or the bones (no contact, unlike
+the paper's mortar contact). The hanging arm is kept in the state cache.
 """
 
 from __future__ import annotations
@@ -16,50 +16,18 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.model.arm_file import Muscle, load_model_file
+from persival.model.arm_body import ArmBody, muscle_profile, rotation_about
+from persival.model.arm_file import Muscle
 from persival.model.assembly import MaterialField
 from persival.model.constraints import Hinge
-from persival.model.geometry import swept_solid_mesh
 from persival.model.mesh import Tet10Mesh
 from persival.model.muscle_unit import MuscleState, MuscleUnit, line_rotation
 from persival.model.progress import SolveTracker
 from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
-from persival.model.state_cache import cached_mesh, load_states, model_cache_dir, save_states
+from persival.model.state_cache import load_states, model_cache_dir, save_states
 from persival.vocabulary import MUSCLES, check_activation_vector
 
-
-def rotation_about(axis: np.ndarray, theta_deg: float) -> np.ndarray:
-    """Rotation matrix about a unit axis (Rodrigues)."""
-    k = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    t = np.radians(theta_deg)
-    return np.eye(3) + np.sin(t) * K + (1.0 - np.cos(t)) * (K @ K)
-
-
-def muscle_profile(muscle: Muscle, s: np.ndarray, length: float) -> tuple[np.ndarray, np.ndarray]:
-    """Radius and muscle fraction gamma_M along the normalized centre-line position s.
-
-    Pure tendon over the tendon lengths, a linear muscle-tendon blend over
-    ``transition_length`` (SPEC 3.1 mixture), then the belly. The radius rises from the
-    tendon's to 90 % of the belly's over 1.5 transition lengths (smoothstep) and bulges to the
-    full belly radius at the middle. Why so blunt: the muscle's sections are in series, so the
-    thinnest pure-muscle section bounds the force the whole unit can pull (0.3 MPa times its
-    area); a fusiform taper (sin(pi x)^(1/2) or ^(1/3)) left about 40 % of the belly's area
-    there, and a full biceps stalled at 72 N, 108 deg.
-    """
-    s_a = muscle.tendon_length[0] / length
-    s_b = 1.0 - muscle.tendon_length[1] / length
-    if s_b - s_a <= 3.0 * muscle.transition_length / length:
-        raise ValueError(f"muscle {muscle.name!r}: tendons and transitions are longer than the muscle ({length:.0f} mm)")
-    r_tendon = muscle.tendon_radius[0] + (muscle.tendon_radius[1] - muscle.tendon_radius[0]) * s
-    ramp = muscle.transition_length / length
-    depth = np.clip(np.minimum(s - s_a, s_b - s), 0.0, None)  # distance into the belly
-    z = np.clip(depth / (1.5 * ramp), 0.0, 1.0)
-    bulge = np.sin(np.pi * np.clip((s - s_a) / (s_b - s_a), 0.0, 1.0))
-    shape = (3.0 * z**2 - 2.0 * z**3) * (0.9 + 0.1 * bulge)
-    radius = r_tendon + (muscle.belly_radius - r_tendon) * shape
-    gamma = np.clip(depth / ramp, 0.0, 1.0)
-    return radius, gamma
+__all__ = ["ArmModel", "ArmState", "muscle_profile", "rotation_about"]
 
 
 @dataclass
@@ -92,7 +60,7 @@ class ArmState:
         }
 
 
-class ArmModel:
+class ArmModel(ArmBody):
     """The FE upper limb: ``solve(activations) -> ArmState`` (SPEC 3.3).
 
     Meshing happens once at construction. Every muscle is its own FE problem
@@ -105,17 +73,10 @@ class ArmModel:
     start_angle_deg = 20.0  # first guess of the hanging arm
 
     def __init__(self, model_file: str | Path | None = None, profile: str = "quick", options: SolverOptions | None = None):
-        self.spec, self.model_hash = load_model_file(model_file)
-        self.profile = profile
-        self.spec.profile(profile)  # unknown profile -> clear error
+        super().__init__(model_file, profile)
         # atol: 1e-6 N on nodal forces of muscles pulling 10-400 N keeps the moment residual
         # below 1e-4 N mm; a tighter floor sits at round-off in nearly unloaded states
         self.options = options or SolverOptions(atol=1e-6)
-        joint = self.spec.joint
-        self.axis = np.asarray(joint.axis, dtype=float) / np.linalg.norm(joint.axis)
-        self.centre = np.asarray(joint.centre, dtype=float)
-        self.mesh, self.muscle_cells, self.muscle_nodes = self._mesh()
-        self.material = self._material()
         self.units = {m.name: self._unit(m) for m in self.spec.ordered_muscles()}
         self._base: ArmState | None = None
 
@@ -137,113 +98,7 @@ class ArmModel:
         for unit in self.units.values():
             unit.options = options
 
-    # -- geometry -----------------------------------------------------------------------------
-    def forearm_point(self, p: np.ndarray, theta_deg: float) -> np.ndarray:
-        """A forearm-frame point (given at theta = 0) at elbow angle theta."""
-        return self.centre + (np.asarray(p, dtype=float) - self.centre) @ rotation_about(self.axis, theta_deg).T
-
-    def centre_line(self, muscle: Muscle, stations: int = 33) -> np.ndarray:
-        """Stations along origin -> via points -> insertion in the muscle's mesh pose."""
-        knots = np.array([muscle.origin, *muscle.via, self.forearm_point(muscle.insertion, muscle.mesh_angle_deg)])
-        seg = np.linalg.norm(np.diff(knots, axis=0), axis=1)
-        if np.any(seg <= 0):
-            raise ValueError(f"muscle {muscle.name!r}: consecutive centre-line points coincide")
-        cum = np.concatenate([[0.0], np.cumsum(seg)])
-        s = np.linspace(0.0, cum[-1], stations)
-        line = np.column_stack([np.interp(s, cum, knots[:, k]) for k in range(3)])
-        if muscle.bow > 0:
-            # bowed away from the hinge in the plane normal to its axis: a slack muscle then
-            # shortens by bending further, smoothly, instead of buckling at a bifurcation
-            chord = knots[-1] - knots[0]
-            normal = np.cross(self.axis, chord)
-            normal /= np.linalg.norm(normal)
-            if normal @ (0.5 * (knots[0] + knots[-1]) - self.centre) < 0:
-                normal = -normal
-            line += muscle.bow * np.sin(np.pi * s / cum[-1])[:, None] * normal
-        return line
-
-    def centre_line_length(self, muscle: Muscle) -> float:
-        """Length (mm) of the muscle's centre line in its mesh pose: the scale of its tissue layout."""
-        return float(np.linalg.norm(np.diff(self.centre_line(muscle), axis=0), axis=1).sum())
-
-    def _mesh(self):
-        """The arm's mesh (from the on-disk cache when this model and profile were meshed before)
-        and each muscle's cells and nodes (contiguous ranges, in file order)."""
-        mesh = cached_mesh(self.model_hash, self.spec.name, self.profile, self._build_mesh)
-        muscle_cells, muscle_nodes = {}, {}
-        for index, muscle in enumerate(self.spec.ordered_muscles()):
-            cells = np.flatnonzero(mesh.cell_data["muscle"] == index)
-            muscle_cells[muscle.name] = cells
-            nodes = np.unique(mesh.cells[cells])
-            muscle_nodes[muscle.name] = np.arange(nodes[0], nodes[-1] + 1)
-        return mesh, muscle_cells, muscle_nodes
-
-    def _build_mesh(self) -> Tet10Mesh:
-        """gmsh: every muscle's swept solid, numbered one after the other (cell data "muscle")."""
-        points, cells, node_sets, cell_data = [], [], {}, {"muscle": [], "fibre": [], "arclength": []}
-        offset = 0
-        for index, muscle in enumerate(self.spec.ordered_muscles()):
-            line = self.centre_line(muscle)
-            radius, _ = muscle_profile(muscle, np.linspace(0.0, 1.0, len(line)), self.centre_line_length(muscle))
-            mesh = swept_solid_mesh(line, radius, self.spec.mesh_size(self.profile, muscle.name))
-            points.append(mesh.points)
-            cells.append(mesh.cells + offset)
-            node_sets[f"{muscle.name}/origin"] = mesh.node_sets["origin"] + offset
-            node_sets[f"{muscle.name}/insertion"] = mesh.node_sets["insertion"] + offset
-            cell_data["muscle"].append(np.full(mesh.n_cells, index))
-            cell_data["fibre"].append(mesh.cell_data["fibre"])
-            cell_data["arclength"].append(mesh.cell_data["arclength"])
-            offset += mesh.n_nodes
-        mesh = Tet10Mesh(
-            np.vstack(points), np.vstack(cells), node_sets=node_sets,
-            cell_data={k: np.concatenate(v) for k, v in cell_data.items()},
-        )
-        mesh.check()
-        return mesh
-
-    def _material(self) -> MaterialField:
-        n = self.mesh.n_cells
-        gamma, k, pre = np.empty(n), np.empty(n), np.empty(n)
-        for muscle in self.spec.ordered_muscles():
-            cells = self.muscle_cells[muscle.name]
-            _, g = muscle_profile(muscle, self.mesh.cell_data["arclength"][cells], self.centre_line_length(muscle))
-            gamma[cells] = g
-            k[cells] = g * muscle.bulk_modulus[0] + (1.0 - g) * muscle.bulk_modulus[1]
-            pre[cells] = muscle.fibre_prestretch
-        self.mesh.cell_data["muscle_fraction"] = gamma
-        return MaterialField.from_cells(4, self.mesh.cell_data["fibre"], gamma, k, pre)
-
-    def line_moment_arm(self, muscle: Muscle, theta_deg: float) -> float:
-        """Moment arm (mm, flexion positive) of the straight origin-insertion line at theta: -dL/dtheta."""
-        return -self.muscle_length(muscle, theta_deg)[1]
-
-    # -- loads --------------------------------------------------------------------------------
-    def gravity_moment(self, theta_deg: float) -> float:
-        """Moment of the forearm's weight about the hinge (N mm, flexion positive): -m g r sin(theta)."""
-        fa = self.spec.forearm
-        return -fa.mass * fa.gravity * fa.centre_of_mass * np.sin(np.radians(theta_deg))
-
-    def passive_joint_moment(self, theta_deg: float) -> float:
-        """K [exp((theta_min - theta)/w) - exp((theta - theta_max)/w)]: stiffens beyond the limits."""
-        j = self.spec.joint
-        lo, hi = j.limits_deg
-        return j.limit_moment * (np.exp((lo - theta_deg) / j.limit_width_deg) - np.exp((theta_deg - hi) / j.limit_width_deg))
-
-    def external_moment(self, theta_rad: float) -> tuple[float, float]:
-        """Gravity + passive joint moment and its derivative per radian (the hinge's load)."""
-        theta = np.degrees(theta_rad)
-        fa, j = self.spec.forearm, self.spec.joint
-        lo, hi = j.limits_deg
-        w = j.limit_width_deg
-        M = self.gravity_moment(theta) + self.passive_joint_moment(theta)
-        dM = -fa.mass * fa.gravity * fa.centre_of_mass * np.cos(theta_rad)
-        dM += j.limit_moment * (-np.exp((lo - theta) / w) - np.exp((theta - hi) / w)) / w * (180.0 / np.pi)
-        return float(M), float(dM)
-
     # -- solves -------------------------------------------------------------------------------
-    def cell_activation(self, activations: np.ndarray) -> np.ndarray:
-        return np.asarray(activations, dtype=float)[self.mesh.cell_data["muscle"]]
-
     def base_state(self, progress=None, cache: bool = True) -> ArmState:
         """The hanging arm (all activations 0): every muscle continued from its mesh pose.
         ``progress(SolveProgress)`` is called at every load step (persival.model.progress).
@@ -379,21 +234,6 @@ class ArmModel:
         return state
 
     # -- the joint equilibrium ----------------------------------------------------------------------
-    def muscle_length(self, muscle: Muscle, theta_deg: float) -> tuple[float, float, float]:
-        """Origin-insertion length L (mm) and its derivatives dL/dtheta, d2L/dtheta2 (per radian).
-
-        The insertion turns about the hinge: I' = k x (I - c), I'' = k x I'.
-        """
-        origin = np.asarray(muscle.origin, dtype=float)
-        insertion = self.forearm_point(muscle.insertion, theta_deg)
-        v1 = np.cross(self.axis, insertion - self.centre)
-        v2 = np.cross(self.axis, v1)
-        chord = insertion - origin
-        L = float(np.linalg.norm(chord))
-        e = chord / L
-        dL = float(e @ v1)
-        return L, dL, float((v1 @ v1 - dL**2) / L + e @ v2)
-
     def moment_balance(self, theta_deg: float, activations, start: dict[str, MuscleState], statistics: dict | None = None,
                        tracker: SolveTracker | None = None):
         """The joint's moment residual g = dPi/dtheta (N mm) at a prescribed angle, the joint

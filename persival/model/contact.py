@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from persival.model.arm_body import rotation_about
 from persival.model.mesh import Tet10Mesh
 
 # the four 3-node sub-triangles of a 6-node face (corners 0-2, mid-sides 3 = (0,1), 4 = (1,2), 5 = (2,0))
@@ -97,8 +98,6 @@ class Capsule:
 
     def rotated(self, axis, centre, theta_deg: float) -> Capsule:
         """Turned by theta about an axis through centre (a forearm bone at elbow angle theta)."""
-        from persival.model.arm import rotation_about  # lazily: arm builds on this module's users
-
         return self.transformed(rotation_about(axis, theta_deg), centre)
 
 
@@ -127,8 +126,6 @@ class HalfSpace:
         return HalfSpace(c + R @ (self.point - c), R @ self.normal, self.name)
 
     def rotated(self, axis, centre, theta_deg: float) -> HalfSpace:
-        from persival.model.arm import rotation_about
-
         return self.transformed(rotation_about(axis, theta_deg), centre)
 
 
