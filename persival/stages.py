@@ -63,7 +63,7 @@ def tables(out: Path, config, console) -> dict:
     from persival.campaign.arm_simulator import ensure_tables
 
     t0 = time.perf_counter()
-    with console.status("FE arm: meshing, the hanging arm, response table columns (dask)") as status:
+    with console.status("FE arm: meshing, rest states, response table columns (dask), the hanging arm from them") as status:
         table = ensure_tables(None, config.profile, None,
                               lambda done, total: status.update(f"FE arm: response table columns {done}/{total}"))
     moments = table.moment_table()

@@ -73,7 +73,7 @@ def register(app: typer.Typer) -> None:
             bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                            console=console)
             with bar:
-                task = bar.add_task("meshing, hanging arm", total=None)
+                task = bar.add_task("meshing, rest states", total=None)
 
                 def report(done, total):
                     bar.update(task, completed=done, total=total, description="response table columns")
