@@ -112,6 +112,17 @@ def test_killed_build_resumes_without_recomputing(arm, tmp_path):
     assert seen[0] == 1 and seen[-1] == 2
 
 
+def test_parallel_build_on_dask_workers_equals_the_inline_one(arm, tmp_path):
+    """Three muscles on two dask workers: the driver keeps at most one task per worker in flight
+    (the third waits and goes to whichever worker frees first); the columns are the inline ones."""
+    grid = dict(angles=[55.0, 60.0], levels=[0.0, 1.0])
+    table = build_response_table(arm, tmp_path / "dask", **grid, n_workers=2, muscles=["brachialis", "anconeus", "triceps"])
+    assert table.done[[1, 3, 4]].all() and not table.done[[0, 2]].any()
+    inline = build_response_table(arm, tmp_path / "inline", **grid, scheduler="inline", muscles=["anconeus"])
+    for j in (0, 1):
+        assert np.allclose(table.column("anconeus", j)["tension"], inline.column("anconeus", j)["tension"], rtol=1e-6)
+
+
 def test_foreign_or_unfinished_tables_are_refused(arm, tmp_path):
     root = tmp_path / "table"
     build_response_table(arm, root, angles=[55.0, 60.0], levels=[0.0, 1.0], scheduler="inline", muscles=[])
