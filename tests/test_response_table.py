@@ -169,7 +169,7 @@ def test_hanging_arm_from_the_tables_is_the_direct_one(arm, solver, tmp_path, mo
     monkeypatch.setenv("PERSIVAL_CACHE", str(tmp_path))
     fresh = ArmModel(profile="coarse")
     fresh.rest_states()
-    assert fresh.load_cached_rest_states() and fresh._cached_base() is None  # rest states only, no hanging arm yet
+    assert fresh.load_cached_rest_states() and not fresh.has_cached_base()  # rest states only, no hanging arm yet
     state = hanging_from_tables(fresh, solver.table)
     assert abs(state.elbow_angle_deg - direct.elbow_angle_deg) < 1e-4
     assert np.abs(state.displacement - direct.displacement).max() < 1e-3

@@ -141,7 +141,7 @@ def ensure_tables(model_file=None, profile: str = "quick", tables: str | None = 
     table = build_response_table(arm, tables, DEFAULT_ANGLES if angles is None else angles,
                                  DEFAULT_LEVELS if levels is None else levels, model_file=model_file, scheduler=scheduler,
                                  n_workers=n_workers, progress=progress)
-    if arm._cached_base() is None:
+    if not arm.has_cached_base():
         hanging_from_tables(arm, table)
     return table
 

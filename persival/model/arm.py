@@ -131,12 +131,10 @@ class ArmModel(ArmBody):
 
     def rest_states(self, tracker: SolveTracker | None = None, cache: bool = True) -> dict[str, MuscleState]:
         """Every muscle's passive equilibrium at its mesh length (the prestretch switched on,
-        SPEC 3.3): from the state cache when there, else solved (20 s on the quick mesh) and,
-        with ``cache``, written there without a hanging arm yet."""
-        loaded = self._cached_groups() if cache else None
-        if loaded is not None:
-            self._set_rest_states(loaded[1]["rest"])
-        else:
+        SPEC 3.3): the units' own when they have them, else from the state cache when there, else
+        solved (20 s on the quick mesh) and, with ``cache``, written there without a hanging arm yet."""
+        in_memory = all(getattr(unit, "_rest", None) is not None for unit in self.units.values())
+        if not in_memory and not (cache and self.load_cached_rest_states()):
             tracker = tracker or SolveTracker(None, "rest state")
             rest = {name: unit.rest_state(tracker.muscle(name)) for name, unit in self.units.items()}
             if cache:
@@ -149,13 +147,16 @@ class ArmModel(ArmBody):
         with ``cache`` keep it in the state cache beside the rest states."""
         if np.any(state.activations):
             raise ValueError(f"the hanging arm has activations 0, not {list(state.activations)}")
-        self.rest_states(cache=cache)
         self._base = state
         if cache:
             self._save_cache(state)
 
+    def has_cached_base(self) -> bool:
+        """Whether the state cache holds this model's hanging arm (not only its rest states)."""
+        return self._cached_base() is not None
+
     def _save_cache(self, hanging: ArmState) -> None:
-        rest = {name: unit.rest_state() for name, unit in self.units.items()}
+        rest = self.rest_states()
         save_states(self.cache_dir() / "rest_state.npz",
                     {"groups": ["rest", "hanging"], "elbow_angle_deg": hanging.elbow_angle_deg,
                      "model_hash": self.model_hash, "profile": self.profile},
