@@ -186,8 +186,11 @@ def test_moment_arms_follow_the_line_of_action_and_are_checked_against_the_bands
 
 
 def test_a_stalled_activation_jump_detours_through_the_taut_mesh_pose(arm, monkeypatch):
+    from scipy.optimize import brentq
+
     unit = arm.units["brachialis"]
-    slack = unit.mesh_length - 15.0
+    # the angle where the brachialis is 15 mm shorter than in its mesh pose
+    slack = brentq(lambda t: unit.length(t) - (unit.mesh_length - 15.0), unit.mesh_angle_deg, 160.0)
     start = unit._continue(slack, 0.0, unit.rest_state(), detour=False)  # passive and shortened: bowed
     taut = unit._continue(unit.mesh_length, 1.0, unit.rest_state(), detour=False)
     reference = unit._continue(slack, 1.0, taut, detour=False)
@@ -211,7 +214,7 @@ def test_a_stalled_activation_jump_detours_through_the_taut_mesh_pose(arm, monke
         raise ConvergenceError("line search failed to reduce the residual")
 
     monkeypatch.setattr(unit.solver, "solve", always_stall)
-    with pytest.raises(ConvergenceError, match="muscle .brachialis. from length .* line search failed"):
+    with pytest.raises(ConvergenceError, match="muscle .brachialis. from .* deg, activation .* line search failed"):
         unit._continue(slack, 1.0, start)
 
 

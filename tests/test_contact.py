@@ -221,3 +221,86 @@ def test_surface_weights_and_rigid_bone_motion():
     samples = ulna.start + np.linspace(0.0, 1.0, 200001)[:, None] * (ulna.end - ulna.start)
     distance = np.array([np.linalg.norm(samples - p, axis=1).min() for p in x])
     assert np.allclose(g, 7.0 - distance, atol=1e-6) and np.allclose(g_moved, g)
+
+
+def wrapped_unit(with_bone: bool, activation_mesh_deg: float = 0.0):
+    """The wrapped muscle above as a MuscleUnit: origin fixed, insertion on a forearm turning about
+    the x axis (the hinge), the cylinder (R = 8 mm) on that axis as its bone (SPEC 3.3 contact)."""
+    from persival.model.muscle_unit import MusclePath, MuscleUnit
+
+    R, r_t = 8.0, 2.5
+    mesh, material, _ = wrapped_muscle(R + r_t + 0.3, 60.0, r_t)
+    ends = {name: mesh.points[mesh.node_sets[name]].mean(axis=0) for name in ("origin", "insertion")}
+    axis = np.array([1.0, 0.0, 0.0])
+
+    def insertion(theta):
+        return rotation_about(axis, theta) @ ends["insertion"]
+
+    def geometry(theta):  # L, dL/dtheta, d2L/dtheta2 (per radian) of the straight line O-I
+        v1 = np.cross(axis, insertion(theta))
+        chord = insertion(theta) - ends["origin"]
+        L = np.linalg.norm(chord)
+        e = chord / L
+        dL = e @ v1
+        return L, dL, (v1 @ v1 - dL**2) / L + e @ np.cross(axis, v1)
+
+    bone = Capsule([-30.0, 0.0, 0.0], [30.0, 0.0, 0.0], R, "trochlea")
+    path = MusclePath(ends["origin"], insertion, geometry, activation_mesh_deg,
+                      bones=(lambda theta: [bone]) if with_bone else None, penalty=5.0)
+    return MuscleUnit("biceps", mesh, material, path, SolverOptions(atol=1e-8)), R + r_t
+
+
+def test_muscle_unit_moment_with_contact_is_the_work_on_its_faces(capsys):
+    """The unit's moment -(T L' + dPi_c/dtheta) (envelope theorem, persival.model.muscle_unit)
+    equals the virtual work of its end faces' reactions in the world frame, computed without
+    the contact term; its slope dM/dtheta and du/dtheta match central differences of solves."""
+    unit, _ = wrapped_unit(True)
+    theta, h = -6.0, 0.25
+    states = {}
+    start = unit.solve(theta - 2 * h, 0.3)
+    for t in (theta - h, theta, theta + h):
+        states[t] = start = unit.solve(t, 0.3, start)
+    state = states[theta]
+    assert state.contact_force > 1.0 and state.max_penetration < 0.5  # wrapped on the bone
+    # world-frame virtual work of the face reactions: dPi*/dtheta = sum f . dx/dtheta
+    unit._set_path(theta, theta)
+    K, f = unit.solver.tangent(state.displacement.ravel(), np.full(unit.mesh.n_cells, 0.3))
+    faces = np.concatenate([unit.mesh.node_sets["origin"], unit.mesh.node_sets["insertion"]])
+    y = unit.mesh.points[faces] + state.displacement[faces]
+
+    def face_positions(t):  # the faces' world positions as the kinematics move them (y of the faces follows L)
+        shift = np.zeros_like(y)
+        shift[len(unit.mesh.node_sets["origin"]):] = (unit.length(t) - unit.length(theta)) * unit.direction
+        return unit.origin + (y + shift - unit.origin) @ unit.rotation(t).T
+
+    dx = (face_positions(theta + 1e-4) - face_positions(theta - 1e-4)) / np.radians(2e-4)
+    world_forces = f.reshape(-1, 3)[faces] @ unit.rotation(theta).T
+    moment = -float(np.sum(world_forces * dx))
+    slope = (states[theta + h].moment - states[theta - h].moment) / np.radians(2 * h)
+    du = (states[theta + h].displacement - states[theta - h].displacement) / np.radians(2 * h)
+    with capsys.disabled():
+        print(f"\nmoment {state.moment:.4f} N mm, faces' virtual work {moment:.4f}; slope {state.moment_slope:.3f} "
+              f"vs central difference {slope:.3f} N mm/rad; contact force {state.contact_force:.2f} N")
+    assert state.moment == pytest.approx(moment, rel=1e-4)
+    assert state.moment_slope == pytest.approx(slope, rel=2e-3)
+    assert np.abs(state.sensitivity - du).max() < 2e-3 * np.abs(du).max()
+
+
+def test_muscle_unit_over_the_trochlea_keeps_its_moment_arm(capsys):
+    """Stretched by extending the elbow, the muscle without its bone straightens through the hinge
+    region and its line of action crosses the hinge (the moment turns extending); on the bone it
+    keeps a flexing moment arm M / |F| near R + tendon radius (F: its insertion face's reaction)."""
+    arms = {}
+    for with_bone in (False, True):
+        unit, floor = wrapped_unit(with_bone)
+        state = unit.solve(-10.0, 0.3, unit.solve(-5.0, 0.3))
+        unit._set_path(-10.0, -10.0)
+        _, f = unit.solver.tangent(state.displacement.ravel(), np.full(unit.mesh.n_cells, 0.3))
+        force = np.linalg.norm(f.reshape(-1, 3)[unit.mesh.node_sets["insertion"]].sum(axis=0))
+        arms[with_bone] = state.moment / force
+        with capsys.disabled():
+            print(f"\nbone={with_bone}: tendon force {force:.2f} N, moment {state.moment:.2f} N mm, moment arm "
+                  f"{arms[with_bone]:.2f} mm (straight line {-unit.path.geometry(-10.0)[1]:.2f}, R + r_t {floor:.1f}), "
+                  f"penetration {state.max_penetration:.3f} mm")
+    assert 0.85 * floor < arms[True] < 1.35 * floor  # 13.0 mm measured: the face reactions act off the centre line
+    assert arms[False] < 0.0  # the straight muscle's line passes behind the hinge

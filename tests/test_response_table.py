@@ -179,18 +179,21 @@ def test_hanging_arm_from_the_tables_is_the_direct_one(arm, solver, tmp_path, mo
 
 
 def test_sensitivity_is_the_slope_of_the_equilibrium(arm):
-    """du/dL from the condensed solve equals the finite-difference slope of two equilibria."""
+    """du/dtheta and dM/dtheta from the condensed solve equal the central-difference slopes of
+    equilibria at neighbouring angles."""
     unit = arm.units["brachialis"]
-    rest = unit.rest_state()
-    h = 0.05
-    plus = unit.solve(rest.length + h, 0.5, rest)
-    minus = unit.solve(rest.length - h, 0.5, plus)
-    centre = unit.solve(rest.length, 0.5, minus)
-    slope = (plus.displacement - minus.displacement) / (2 * h)
+    theta, h = unit.mesh_angle_deg, 0.05
+    plus = unit.solve(theta + h, 0.5, unit.rest_state())
+    minus = unit.solve(theta - h, 0.5, plus)
+    centre = unit.solve(theta, 0.5, minus)
+    step = np.radians(2 * h)
+    slope = (plus.displacement - minus.displacement) / step
     assert np.abs(centre.sensitivity - slope).max() < 1e-2 * np.abs(slope).max()
-    # the insertion face moves rigidly along the line of action, one mm per mm
+    assert centre.moment_slope == pytest.approx((plus.moment - minus.moment) / step, rel=1e-3)
+    # the insertion face moves rigidly along the line of action, dL/dtheta mm per radian
     face = unit.mesh.node_sets["insertion"]
-    assert np.allclose(centre.sensitivity[face], unit.direction, atol=1e-12)
+    dL = unit.path.geometry(theta)[1]
+    assert np.allclose(centre.sensitivity[face], dL * unit.direction, atol=1e-9)
 
 
 def test_hermite_guess_reproduces_table_states_and_beats_linear(arm, solver):
@@ -200,10 +203,10 @@ def test_hermite_guess_reproduces_table_states_and_beats_linear(arm, solver):
     at_node = solver.guess(muscle, table.angles_deg[k], 0.5)
     assert np.allclose(at_node.displacement, table.state(muscle, k, level).displacement, atol=1e-5)
     theta = 0.5 * (table.angles_deg[k] + table.angles_deg[k + 1])
-    exact = arm.units[muscle].solve(solver.length(muscle, theta), 0.5, table.state(muscle, k, level))
+    exact = arm.units[muscle].solve(theta, 0.5, table.state(muscle, k, level))
     hermite = np.abs(solver.guess(muscle, theta, 0.5).displacement - exact.displacement).max()
     a, b = table.state(muscle, k, level), table.state(muscle, k + 1, level)
-    w = (exact.length - a.length) / (b.length - a.length)
+    w = (theta - a.angle_deg) / (b.angle_deg - a.angle_deg)
     linear = np.abs((1 - w) * a.displacement + w * b.displacement - exact.displacement).max()
     assert hermite < 0.5 * linear, (hermite, linear)
 

@@ -4,12 +4,13 @@ Without muscle-muscle contact every muscle is its own FE body whose state, tensi
 about the hinge depend only on the elbow angle theta and its own activation a_m (SPEC 3.3), so
 the joint equilibrium of any activation vector is the scalar equation
 ``sum_m M_m(theta, a_m) + M_gravity(theta) + M_passive_joint(theta) = 0`` with
-``M_m = -T_m(L_m(theta), a_m) dL_m/dtheta`` (flexion positive). A table holds, per muscle and
-activation level, the FE tension, axial stiffness and moment at each angle, computed by
+``M_m = -(T_m dL_m/dtheta + dPi_c/dtheta)`` (flexion positive; the second term is the work of the
+bones the muscle wraps over, persival.model.muscle_unit). A table holds, per muscle and
+activation level, the FE tension, moment and moment slope dM/dtheta at each angle, computed by
 continuation along theta from a stretched start (:func:`sweep_muscle`, also behind
-``persival curves``), NaN where a solve fails. Between the tabulated angles the tension is a
-cubic Hermite interpolant (slopes dT/dtheta = k dL/dtheta from the FE axial stiffness) times the
-exact moment arm; between activation levels it is linear.
+``persival curves``), NaN where a solve fails. Between the tabulated angles the moment is a
+cubic Hermite interpolant (slopes from the FE Schur complement); between activation levels it
+is linear.
 
 Files: one ``.npz``, arrays and a JSON header (model hash, profile, which columns are done),
 written atomically after every (muscle, level) column: a killed build resumes without redoing
@@ -33,6 +34,7 @@ __all__ = ["MomentTable", "TableMismatchError", "build_moment_table", "empty_mom
            "check_grids", "resumable", "sweep_muscle", "FORMAT"]
 
 FORMAT = "persival-moment-table"
+VERSION = 2  # 2: moments and their slopes (with contact), no longer tension and axial stiffness
 FINE_STEP_DEG = 0.25  # geometry, gravity and passive joint are stored this finely (exact, cheap)
 
 
@@ -50,27 +52,27 @@ def _path(angles: np.ndarray, max_step_deg: float) -> tuple[np.ndarray, np.ndarr
     return path, np.searchsorted(path, angles - 1e-9)
 
 
-def _next_state(unit, length: float, activation: float, state, previous):
+def _next_state(unit, theta_deg: float, activation: float, state, previous):
     """The next state of a sweep: Newton from an extrapolation of the last states (their shapes
-    change smoothly with the length), else load-stepped continuation from the last.
+    change smoothly with the angle), else load-stepped continuation from the last.
 
-    The extrapolation is the quadratic through the last state, its slope du/dL and the one
-    before (the tangent line when there is none before). Why: a slack, bowed muscle shortened by 9 mm took 100 to 200 Newton
-    iterations by load stepping from the last state (coarse brachioradialis, profiled); from the
-    extrapolated shape a few. The insertion face of the guess sits exactly at ``length`` (it is
-    linear in L, and so is every extrapolation here).
+    The extrapolation is the quadratic through the last state, its slope du/dtheta and the one
+    before (the tangent line when there is none before). Why: a slack, bowed muscle shortened by
+    9 mm took 100 to 200 Newton iterations by load stepping from the last state (coarse
+    brachioradialis, profiled); from the extrapolated shape a few. The solve puts the guess's
+    insertion face where theta puts it.
     """
-    step = length - state.length
+    step = np.radians(theta_deg - state.angle_deg)
     if step != 0.0:  # every MuscleUnit state carries its slope
         guess = state.displacement + step * state.sensitivity
-        if previous is not None and previous.length != state.length:
-            back = previous.length - state.length
+        if previous is not None and previous.angle_deg != state.angle_deg:
+            back = np.radians(previous.angle_deg - state.angle_deg)
             curvature = (previous.displacement - state.displacement - back * state.sensitivity) / back**2
             guess = guess + step**2 * curvature
-        solved = unit.solve_from_guess(length, activation, guess, max_iterations=10)
+        solved = unit.solve_from_guess(theta_deg, activation, guess, max_iterations=10)
         if solved is not None:
             return solved
-    return unit.solve(length, activation, state)
+    return unit.solve(theta_deg, activation, state)
 
 
 def sweep_muscle(arm, muscle, angles, activation: float, max_step_deg: float = 10.0, start=None) -> dict:
@@ -84,23 +86,23 @@ def sweep_muscle(arm, muscle, angles, activation: float, max_step_deg: float = 1
     (activating a slack, bowed muscle in place is a snap-through, not a continuation), reached
     passively first, or activated from ``start`` (a state at that longest length, e.g. the previous
     level's ``longest_state``: continuation along a). Both run outwards from the start; the first
-    failure ends a direction and leaves the rest NaN. Returns tension T (N), axial stiffness
-    k = dT/dL (N/mm), the moment -T dL/dtheta (N mm, flexion positive) and the length geometry at
-    ``angles``, the states there (None where a solve failed) and the state at the longest length.
+    failure ends a direction and leaves the rest NaN. Returns tension T (N), the moment M (N mm,
+    flexion positive) and its slope dM/dtheta (N mm/rad) and the length geometry at ``angles``,
+    the states there (None where a solve failed) and the state at the longest length.
     """
     angles = np.asarray(angles, dtype=float)
     path, index = _path(angles, max_step_deg)
     unit = arm.units[muscle.name]
     geometry = np.array([arm.muscle_length(muscle, t) for t in path])
     lengths = geometry[:, 0]
-    tension, stiffness = np.full(len(path), np.nan), np.full(len(path), np.nan)
+    tension, moment, slope = (np.full(len(path), np.nan) for _ in range(3))
     longest = int(np.argmax(lengths))
     first = int(np.argmin(np.abs(path - muscle.mesh_angle_deg))) if activation == 0.0 else longest
     origin, states = None, {}
     for begin in ([start] if start is not None and first == longest else []) + [None]:
         try:
-            origin = begin or unit.solve(lengths[first], 0.0, unit.rest_state())
-            origin = unit.solve(lengths[first], float(activation), origin)
+            origin = begin or unit.solve(path[first], 0.0, unit.rest_state())
+            origin = unit.solve(path[first], float(activation), origin)
             break
         except ConvergenceError:
             origin = None
@@ -109,14 +111,14 @@ def sweep_muscle(arm, muscle, angles, activation: float, max_step_deg: float = 1
             state, previous = origin, None
             for k in sweep:
                 try:
-                    state, previous = _next_state(unit, lengths[k], float(activation), state, previous), state
+                    state, previous = _next_state(unit, path[k], float(activation), state, previous), state
                 except ConvergenceError:
                     break
-                tension[k], stiffness[k] = state.tension, state.stiffness
+                tension[k], moment[k], slope[k] = state.tension, state.moment, state.moment_slope
                 states[k] = state
     dL = geometry[index, 1]
     return {"length_mm": lengths[index], "dL_dtheta_mm_per_rad": dL, "tension_N": tension[index],
-            "stiffness_N_per_mm": stiffness[index], "moment_Nmm": -tension[index] * dL, "longest_state": states.get(longest),
+            "moment_Nmm": moment[index], "moment_slope_Nmm_per_rad": slope[index], "longest_state": states.get(longest),
             "states": [states.get(int(k)) for k in index]}
 
 
@@ -127,7 +129,8 @@ class MomentTable:
     angles_deg: np.ndarray  # (n_theta,)
     levels: np.ndarray  # (n_a,) activation levels, increasing, 0 first
     tension: np.ndarray  # (5, n_theta, n_a) N
-    stiffness: np.ndarray  # (5, n_theta, n_a) N/mm
+    moments: np.ndarray  # (5, n_theta, n_a) M_m, N mm, flexion positive (SPEC 3.3)
+    moment_slopes: np.ndarray  # (5, n_theta, n_a) dM/dtheta, N mm/rad
     done: np.ndarray  # (5, n_a) bool: column computed
     fine_deg: np.ndarray  # (n_fine,) fine angle grid of the exact geometry and loads
     fine_dL: np.ndarray  # (5, n_fine) dL/dtheta, mm/rad
@@ -137,22 +140,12 @@ class MomentTable:
 
     # ------------------------------------------------------------------ derived arrays
     @property
-    def dL(self) -> np.ndarray:
-        """(5, n_theta) dL/dtheta at the table angles (mm/rad)."""
-        return np.array([np.interp(self.angles_deg, self.fine_deg, d) for d in self.fine_dL])
-
-    @property
-    def moments(self) -> np.ndarray:
-        """(5, n_theta, n_a) M_m = -T dL/dtheta, N mm, flexion positive (SPEC 3.3)."""
-        return -self.tension * self.dL[:, :, None]
-
-    @property
     def complete(self) -> bool:
         return bool(self.done.all())
 
     def finite_range_deg(self) -> tuple[float, float]:
         """The widest run of table angles where every column is finite."""
-        ok = np.isfinite(self.tension).all(axis=(0, 2))
+        ok = np.isfinite(self.moments).all(axis=(0, 2))
         if not ok.any():
             raise ValueError("the table has no angle where every muscle converged at every level")
         edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(int), [0]])))  # run starts, ends + 1
@@ -174,18 +167,16 @@ class MomentTable:
         m = MUSCLES.index(muscle)
         theta = np.atleast_1d(np.asarray(theta_deg, dtype=float))
         rad = np.radians(self.angles_deg)
-        dL_table = self.dL[m]
         out = np.full((len(theta), len(self.levels)), np.nan)
         for j in range(len(self.levels)):
-            T, k = self.tension[m, :, j], self.stiffness[m, :, j]
-            ok = np.isfinite(T) & np.isfinite(k)
+            M, dM = self.moments[m, :, j], self.moment_slopes[m, :, j]
+            ok = np.isfinite(M) & np.isfinite(dM)
             if ok.sum() < 2:
                 continue
-            spline = CubicHermiteSpline(rad[ok], T[ok], k[ok] * dL_table[ok])  # dT/dtheta = k dL/dtheta
+            spline = CubicHermiteSpline(rad[ok], M[ok], dM[ok])
             inside = (theta >= self.angles_deg[ok][0] - 1e-9) & (theta <= self.angles_deg[ok][-1] + 1e-9)
             out[inside, j] = spline(np.radians(theta[inside]))
-        dL = np.interp(theta, self.fine_deg, self.fine_dL[m])
-        return -out * dL[:, None]
+        return out
 
     def moment(self, muscle: str, theta_deg, activation) -> np.ndarray:
         """M_m(theta, a) in N mm: Hermite in theta, linear in a between the levels (NaN outside)."""
@@ -196,14 +187,15 @@ class MomentTable:
 
     # ------------------------------------------------------------------ persistence
     def header(self) -> dict:
-        return {"format": FORMAT, "version": 1, "muscles": list(MUSCLES), **self.meta}
+        return {"format": FORMAT, "version": VERSION, "muscles": list(MUSCLES), **self.meta}
 
     def save(self, path: str | Path) -> Path:
         """Write atomically (a kill leaves the previous file or the new one, never half of one)."""
         path = Path(path)
         tmp = path.with_name(f".{path.name}.writing.npz")
         np.savez(tmp, header=np.array(json.dumps(self.header(), default=float)), angles_deg=self.angles_deg,
-                 levels=self.levels, tension=self.tension, stiffness=self.stiffness, done=self.done,
+                 levels=self.levels, tension=self.tension, moments=self.moments, moment_slopes=self.moment_slopes,
+                 done=self.done,
                  fine_deg=self.fine_deg, fine_dL=self.fine_dL, fine_gravity=self.fine_gravity, fine_joint=self.fine_joint)
         os.replace(tmp, path)
         return path
@@ -223,6 +215,9 @@ class MomentTable:
             raise TableMismatchError(f"{path} is not a moment table ({exc})") from None
         if header.get("format") != FORMAT:
             raise TableMismatchError(f"{path} is not a moment table (format {header.get('format')!r})")
+        if header.get("version") != VERSION:
+            raise TableMismatchError(f"{path} is a moment table of format version {header.get('version')}, "
+                                     f"this PerSival reads {VERSION}: rebuild it")
         meta = {k: v for k, v in header.items() if k not in ("format", "version", "muscles")}
         table = cls(meta=meta, **arrays)
         if model_hash is not None and meta.get("model_hash") != model_hash:
@@ -248,7 +243,8 @@ def empty_moment_table(arm, angles: np.ndarray, levels: np.ndarray) -> MomentTab
             "joint_limits_deg": [float(v) for v in arm.spec.joint.limits_deg],
             "column_seconds": [[None] * len(levels) for _ in MUSCLES]}
     return MomentTable(
-        angles_deg=angles, levels=levels, tension=np.full(shape, np.nan), stiffness=np.full(shape, np.nan),
+        angles_deg=angles, levels=levels, tension=np.full(shape, np.nan), moments=np.full(shape, np.nan),
+        moment_slopes=np.full(shape, np.nan),
         done=np.zeros((len(MUSCLES), len(levels)), bool), fine_deg=fine,
         fine_dL=np.array([[arm.muscle_length(m, t)[1] for t in fine] for m in muscles]),
         fine_gravity=np.array([arm.gravity_moment(t) for t in fine]),
@@ -312,7 +308,8 @@ def build_moment_table(arm_or_profile, angles_deg, activations, progress=None, o
             t0 = time.perf_counter()
             sweep = sweep_muscle(arm, muscle, angles, float(a), start=longest.get(muscle.name))
             longest[muscle.name] = sweep["longest_state"]  # the next level continues from it
-            table.tension[m, :, j], table.stiffness[m, :, j] = sweep["tension_N"], sweep["stiffness_N_per_mm"]
+            table.tension[m, :, j], table.moments[m, :, j] = sweep["tension_N"], sweep["moment_Nmm"]
+            table.moment_slopes[m, :, j] = sweep["moment_slope_Nmm_per_rad"]
             table.done[m, j] = True
             table.meta["column_seconds"][m][j] = time.perf_counter() - t0
             if out is not None:

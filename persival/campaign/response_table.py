@@ -11,9 +11,9 @@ along theta (:func:`~persival.campaign.moment_table.sweep_muscle`), each level c
 the previous level's longest state (continuation along a). Layout of a table folder:
 
     header.json                  format, model hash, profile, mesh fingerprint, angles, levels
-    columns/<muscle>-<j>.npz     tension (N), stiffness (N/mm), displacement (n_theta, n_nodes, 3)
-                                 in the muscle's own frame and its slope du/dL (same shape; float32),
-                                 NaN where a solve failed
+    columns/<muscle>-<j>.npz     tension (N), moment (N mm), moment_slope (N mm/rad), displacement
+                                 (n_theta, n_nodes, 3) in the muscle's own frame and its slope
+                                 du/dtheta (mm/rad, same shape; float32), NaN where a solve failed
 
 Every column file is written to a temporary name and renamed when it is finished, so a killed
 build keeps every finished column and resumes with the next; the columns of different muscles
@@ -40,11 +40,10 @@ __all__ = ["FORMAT", "VERSION", "DEFAULT_ANGLES", "DEFAULT_LEVELS", "ResponseTab
            "default_table_dir"]
 
 FORMAT = "persival-response-table"
-VERSION = 2  # 2: the columns carry du/dL (cubic Hermite starts); 1 had the states only
+VERSION = 3  # 3: moments and du/dtheta (contact with the bones); 2: tension, stiffness and du/dL
 # beyond the joint's limits (0, 160 deg) on both sides: strong extensors rest a few degrees
-# below 0 and, without bone contact (issue 11), an active triceps with the flexors turns the
-# forearm to 170 to 182 deg; a state whose equilibrium lies off the table is solved directly,
-# at about 20 times the cost
+# below 0 and strong flexors press into the passive joint limit beyond 160 deg; a state whose
+# equilibrium lies off the table is solved directly, at about 20 times the cost
 DEFAULT_ANGLES = tuple(float(a) for a in np.arange(-10.0, 185.0 + 1e-9, 5.0))
 # the levels of a level-2 sparse grid (and, every other one, of level 1): its states need no
 # continuation in a, only the re-solve at the equilibrium angle
@@ -148,7 +147,7 @@ class ResponseTable:
         return bool(self.done.all())
 
     def column(self, muscle: str, level: int) -> dict:
-        """tension (n_theta,), stiffness (n_theta,), displacement and sensitivity (n_theta, n_nodes, 3)
+        """tension, moment, moment_slope (n_theta,), displacement and sensitivity (n_theta, n_nodes, 3)
         float32, seconds."""
         key = (muscle, level)
         if key not in self._columns:
@@ -157,10 +156,10 @@ class ResponseTable:
         return self._columns[key]
 
     def column_summary(self, muscle: str, level: int) -> dict:
-        """tension, stiffness and seconds of a column, without decompressing its node arrays
+        """tension, moment, moment_slope and seconds of a column, without decompressing its node arrays
         (opening the tables for their moments reads every column: a warm ``simulate`` spent
         seconds on the node arrays it never used)."""
-        keys = ("tension", "stiffness", "seconds")
+        keys = ("tension", "moment", "moment_slope", "seconds")
         if (muscle, level) in self._columns:
             return {k: self._columns[(muscle, level)][k] for k in keys}
         with np.load(self.column_path(muscle, level), allow_pickle=False) as data:  # reads only these keys
@@ -176,36 +175,36 @@ class ResponseTable:
                 sensitivity[k] = state.sensitivity
         path = self.column_path(muscle, level)
         tmp = path.with_name(f".{path.name}.{os.getpid()}.writing.npz")
-        np.savez_compressed(tmp, tension=sweep["tension_N"], stiffness=sweep["stiffness_N_per_mm"],
-                            displacement=displacement, sensitivity=sensitivity, seconds=np.array(seconds))
+        np.savez_compressed(tmp, tension=sweep["tension_N"], moment=sweep["moment_Nmm"],
+                            moment_slope=sweep["moment_slope_Nmm_per_rad"], displacement=displacement,
+                            sensitivity=sensitivity, seconds=np.array(seconds))
         os.replace(tmp, path)
 
     def state(self, muscle: str, k: int, level: int) -> MuscleState | None:
         """The tabulated state of ``muscle`` at angle index k and level index j (None if it failed)."""
         col = self.column(muscle, level)
-        if not np.isfinite(col["tension"][k]):
+        if not np.isfinite(col["moment"][k]):
             return None
-        return MuscleState(float(self.lengths(muscle)[k]), float(self.levels[level]),
-                           col["displacement"][k].astype(float), float(col["tension"][k]), float(col["stiffness"][k]), 0.0,
-                           sensitivity=col["sensitivity"][k].astype(float))
+        return MuscleState(float(self.angles_deg[k]), float(self.lengths(muscle)[k]), float(self.levels[level]),
+                           col["displacement"][k].astype(float), float(col["tension"][k]), float(col["moment"][k]),
+                           float(col["moment_slope"][k]), 0.0, sensitivity=col["sensitivity"][k].astype(float))
 
     def moment_table(self) -> MomentTable:
         """The tables' moments as a :class:`MomentTable` (unfinished columns NaN, ``done`` False)."""
         n_theta, n_a = len(self.angles_deg), len(self.levels)
-        tension = np.full((5, n_theta, n_a), np.nan)
-        stiffness = np.full((5, n_theta, n_a), np.nan)
+        tension, moment, slope = (np.full((5, n_theta, n_a), np.nan) for _ in range(3))
         done = self.done
         seconds = [[None] * n_a for _ in MUSCLES]
         for m, name in enumerate(MUSCLES):
             for j in range(n_a):
                 if done[m, j]:
                     col = self.column_summary(name, j)
-                    tension[m, :, j], stiffness[m, :, j] = col["tension"], col["stiffness"]
+                    tension[m, :, j], moment[m, :, j], slope[m, :, j] = col["tension"], col["moment"], col["moment_slope"]
                     seconds[m][j] = float(col["seconds"])
         h = self.header
         meta = {"model_hash": h["model_hash"], "profile": h["profile"], "forearm": h["forearm"],
                 "joint_limits_deg": h.get("joint_limits_deg"), "column_seconds": seconds}
-        return MomentTable(self.angles_deg, self.levels, tension, stiffness, done, np.asarray(h["fine_deg"]),
+        return MomentTable(self.angles_deg, self.levels, tension, moment, slope, done, np.asarray(h["fine_deg"]),
                            np.asarray(h["fine_dL"]), np.asarray(h["fine_gravity"]), np.asarray(h["fine_joint"]), meta)
 
     def build_seconds(self) -> float:

@@ -5,9 +5,8 @@ Two paths, both from :class:`~persival.campaign.response_table.ResponseTable`:
 * **exact** (:meth:`TableSolver.solve`): the scalar joint equilibrium
   ``sum_m M_m(theta, a_m) + M_gravity + M_joint = 0`` on the tabulated moments (Hermite in
   theta, linear in a) gives theta_0; each muscle is re-solved by Newton at (theta_0, a_m) from
-  its four neighbouring table states (in its own frame: cubic Hermite in length with the
-  tabulated slopes du/dL, linear in activation, so the insertion face sits exactly where
-  theta_0 puts it), and the
+  its four neighbouring table states (in its own frame: cubic Hermite in theta with the
+  tabulated slopes du/dtheta, linear in activation), and the
   joint equilibrium is converged once more with the FE moments (ArmModel.equilibrium_from). The
   result is a converged FE solution of the full model, to the solver's tolerances, not an
   interpolation. A muscle whose Newton from the guess fails (off-level activations of a muscle
@@ -20,6 +19,7 @@ Two paths, both from :class:`~persival.campaign.response_table.ResponseTable`:
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 from scipy.optimize import brentq
@@ -86,16 +86,14 @@ class TableSolver:
     # ------------------------------------------------------------------ states from the table
     def guess(self, muscle: str, theta_deg: float, activation: float) -> MuscleState | None:
         """The muscle's state at (theta, a) from its four neighbouring table states (None where
-        one failed): cubic Hermite in its length through the two bracketing angles (values and
-        slopes du/dL), linear in activation. Hermite keeps the insertion face exact (the face
-        moves linearly in L) and is fourth-order in the angle step where linear is second."""
-        lengths = self.table.lengths(muscle)
-        L = self.length(muscle, theta_deg)
-        k, w_theta = _bracket(self.table.angles_deg, theta_deg)
-        dL = lengths[k + 1] - lengths[k]
-        t = (L - lengths[k]) / dL if abs(dL) > 1e-9 else w_theta
-        # cubic Hermite basis: values at k, k+1; slopes (times dL) at k, k+1
-        basis = (2 * t**3 - 3 * t**2 + 1, -2 * t**3 + 3 * t**2, (t**3 - 2 * t**2 + t) * dL, (t**3 - t**2) * dL)
+        one failed): cubic Hermite in theta through the two bracketing angles (values and
+        slopes du/dtheta), linear in activation: fourth-order in the angle step where linear
+        is second (a solve puts the insertion face where theta puts it)."""
+        angles = self.table.angles_deg
+        k, t = _bracket(angles, theta_deg)
+        h = np.radians(angles[k + 1] - angles[k])
+        # cubic Hermite basis: values at k, k+1; slopes (times the step, rad) at k, k+1
+        basis = (2 * t**3 - 3 * t**2 + 1, -2 * t**3 + 3 * t**2, (t**3 - 2 * t**2 + t) * h, (t**3 - t**2) * h)
         j, v = _bracket(self.table.levels, activation)
         guess = np.zeros((self.table.header["n_nodes"][muscle], 3))
         for weight, jj in ((1 - v, j), (v, j + 1)):
@@ -106,17 +104,18 @@ class TableSolver:
             if not (np.isfinite(d).all() and np.isfinite(s).all()):
                 return None
             guess += weight * (basis[0] * d[0] + basis[1] * d[1] + basis[2] * s[0] + basis[3] * s[1])
-        return MuscleState(float(L), float(activation), guess, float("nan"), float("nan"), 0.0)
+        return MuscleState(float(theta_deg), self.length(muscle, theta_deg), float(activation), guess,
+                           float("nan"), float("nan"), float("nan"), 0.0)
 
     def nearest(self, muscle: str, theta_deg: float, activation: float) -> MuscleState:
         """The finite table state nearest (theta, a) (theta in degrees counts like a in 1/30)."""
         table = self.table
         best, where = np.inf, None
         for j, level in enumerate(table.levels):
-            tension = table.column(muscle, j)["tension"]
+            moment = table.column(muscle, j)["moment"]
             for k, angle in enumerate(table.angles_deg):
                 d = abs(angle - theta_deg) / 30.0 + abs(level - activation)
-                if np.isfinite(tension[k]) and d < best:
+                if np.isfinite(moment[k]) and d < best:
                     best, where = d, (k, j)
         if where is None:
             raise ValueError(f"the response table has no converged state of {muscle}")
@@ -130,9 +129,9 @@ class TableSolver:
         unit = self.arm.units[muscle]
         guess = self.guess(muscle, theta_deg, activation)
         if guess is not None:
-            # its own stiffness and du/dL (one factorization more): with interpolated ones the
+            # its own moment slope and du/dtheta (one factorization more): with interpolated ones the
             # joint iteration's derivative is off by about 1 % and it takes 2 to 3 corrections, not 1
-            state = unit.solve_from_guess(guess.length, activation, guess.displacement)
+            state = unit.solve_from_guess(theta_deg, activation, guess.displacement)
             if state is not None:
                 return state, "guess"
         levels = self._off_level_sides(activation)
@@ -141,17 +140,17 @@ class TableSolver:
             start = self.guess(muscle, theta_deg, level)
             if start is not None:
                 on_level[level] = start
-                state = unit.solve_from_guess(start.length, activation, start.displacement, max_iterations=20)
+                state = unit.solve_from_guess(theta_deg, activation, start.displacement, max_iterations=20)
                 if state is not None:
                     return state, f"level {level:g}"
         for level, start in on_level.items():  # that level's equilibrium, then a alone moves
-            solved = unit.solve_from_guess(start.length, level, start.displacement)
+            solved = unit.solve_from_guess(theta_deg, level, start.displacement)
             if solved is not None:
                 try:
-                    return unit.solve(start.length, activation, solved), f"from level {level:g}"
+                    return unit.solve(theta_deg, activation, solved), f"from level {level:g}"
                 except ConvergenceError:
                     pass
-        return unit.solve(self.length(muscle, theta_deg), activation, self.nearest(muscle, theta_deg, activation)), \
+        return unit.solve(theta_deg, activation, self.nearest(muscle, theta_deg, activation)), \
             "continuation"
 
     def _off_level_sides(self, activation: float) -> list[float]:
@@ -191,7 +190,8 @@ class TableSolver:
         """The table-only path: (theta_0, world displacements (n_nodes, 3) of all muscles)."""
         alpha = check_activation_vector(activations)
         theta0 = self.start_angle(alpha, near_deg)
-        states = {name: self.guess(name, theta0, float(a)) or self.nearest(name, theta0, float(a))
+        # a failed neighbour: the nearest table state, placed at theta_0 as it is
+        states = {name: self.guess(name, theta0, float(a)) or replace(self.nearest(name, theta0, float(a)), angle_deg=theta0)
                   for name, a in zip(MUSCLES, alpha)}
         return theta0, self.arm.displacement(states, theta0)
 

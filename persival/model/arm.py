@@ -3,9 +3,10 @@
 SPEC 3.3. Each muscle's origin face is fixed to the humerus, its insertion face is tied to the
 forearm, which rotates about the elbow hinge (mesh, kinematics and the hinge's external loads:
 :mod:`persival.model.arm_body`). The unknowns are the muscle displacements and the elbow angle
-theta; theta's equation is the moment balance about the hinge of the insertion forces, gravity
-and the passive joint moment. Muscles do not touch each other or the bones (no contact, unlike
-the paper's mortar contact). The hanging arm is kept in the state cache.
+theta; theta's equation is the moment balance about the hinge of the muscles (their insertion
+forces and the forces they press on the bones they wrap over: frictionless penalty contact,
+SPEC 3.3), gravity and the passive joint moment. Muscles do not touch each other (the paper's
+mortar contact does). The hanging arm is kept in the state cache.
 """
 
 from __future__ import annotations
@@ -20,8 +21,9 @@ from persival.model.arm_body import ArmBody, muscle_profile, rotation_about
 from persival.model.arm_file import Muscle
 from persival.model.assembly import MaterialField
 from persival.model.constraints import Hinge
+from persival.model.contact import bone_obstacles
 from persival.model.mesh import Tet10Mesh
-from persival.model.muscle_unit import MuscleState, MuscleUnit, line_rotation
+from persival.model.muscle_unit import MusclePath, MuscleState, MuscleUnit
 from persival.model.progress import SolveTracker
 from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
 from persival.model.state_cache import load_states, model_cache_dir, save_states
@@ -89,8 +91,20 @@ class ArmModel(ArmBody):
         mf = self.material
         material = MaterialField(mf.fibre[cells], mf.muscle_fraction[cells], mf.bulk_modulus[cells],
                                  mf.fibre_prestretch[cells], mf.parameters)
-        insertion = self.forearm_point(muscle.insertion, muscle.mesh_angle_deg)
-        return MuscleUnit(muscle.name, mesh, material, muscle.origin, insertion, self.options)
+        path = MusclePath(
+            origin=np.asarray(muscle.origin, dtype=float),
+            insertion=lambda theta, m=muscle: self.forearm_point(m.insertion, theta),
+            geometry=lambda theta, m=muscle: self.muscle_length(m, theta),
+            mesh_angle_deg=muscle.mesh_angle_deg,
+            bones=self._bones_of(muscle) if muscle.wraps else None,
+            penalty=self.spec.contact.penalty,
+        )
+        return MuscleUnit(muscle.name, mesh, material, path, self.options)
+
+    def _bones_of(self, muscle: Muscle):
+        """theta -> the capsules of the bones ``muscle`` wraps over, world frame (SPEC 3.3 contact)."""
+        bones = [self.spec.bone(name) for name in muscle.wraps]
+        return lambda theta: bone_obstacles(bones, self.centre, self.axis, theta)
 
     def set_options(self, options: SolverOptions) -> None:
         """Solver options of every solve of this model (retries use smaller load steps)."""
@@ -189,8 +203,8 @@ class ArmModel(ArmBody):
         if loaded is None or "hanging" not in loaded[1]:
             return None
         header, groups = loaded
-        # tension NaN: the states are re-converged (checked) by Newton, not taken as solved
-        hanging = {name: replace(s, tension=float("nan")) for name, s in groups["hanging"].items()}
+        # moment NaN: the states are re-converged (checked) by Newton, not taken as solved
+        hanging = {name: replace(s, moment=float("nan")) for name, s in groups["hanging"].items()}
         return groups["rest"], hanging, float(header["elbow_angle_deg"])
 
     def equilibrium_from(self, activations, start: dict[str, MuscleState], angle_deg: float, progress=None) -> ArmState:
@@ -240,18 +254,17 @@ class ArmModel(ArmBody):
         """The joint's moment residual g = dPi/dtheta (N mm) at a prescribed angle, the joint
         stiffness dg/dtheta (N mm/rad, the muscles re-equilibrated) and the muscle states.
 
-        g = sum_m T_m L_m' - M_ext: a muscle's work on the joint is its tension times its
-        length change (module muscle_unit); g < 0 turns the forearm towards flexion.
+        g = -sum_m M_m - M_ext: a muscle's work on the joint is ``-M_m = T L' + dPi_c/dtheta``
+        (module muscle_unit); g < 0 turns the forearm towards flexion.
         """
         states, g, dg = {}, 0.0, 0.0
         for muscle, a in zip(self.spec.ordered_muscles(), activations):
-            L, dL, d2L = self.muscle_length(muscle, theta_deg)
             # near corrections keep their start's slope (chord in theta: dg need not be exact)
-            state = self.units[muscle.name].solve(L, float(a), start[muscle.name], tracker and tracker.muscle(muscle.name),
-                                                  fresh_slope=False)
+            state = self.units[muscle.name].solve(theta_deg, float(a), start[muscle.name],
+                                                  tracker and tracker.muscle(muscle.name), fresh_slope=False)
             states[muscle.name] = state
-            g += state.tension * dL
-            dg += state.stiffness * dL**2 + state.tension * d2L
+            g -= state.moment
+            dg -= state.moment_slope
             if statistics is not None:
                 statistics["iterations"] = statistics.get("iterations", 0) + state.iterations
                 statistics["muscle_solves"] = statistics.get("muscle_solves", 0) + 1
@@ -299,11 +312,10 @@ class ArmModel(ArmBody):
             stats["joint_iterations"] += 1
         else:
             raise ConvergenceError(f"joint equilibrium not found: moment residual {g:.3e} N mm at {theta:.2f} deg")
-        moments, forces = {}, {}
-        for muscle in self.spec.ordered_muscles():
-            _, dL, _ = self.muscle_length(muscle, theta)
-            forces[muscle.name] = states[muscle.name].tension
-            moments[muscle.name] = -states[muscle.name].tension * dL
+        moments = {name: s.moment for name, s in states.items()}
+        forces = {name: s.tension for name, s in states.items()}
+        stats["max_penetration_mm"] = max(s.max_penetration for s in states.values())
+        stats["contact_force_N"] = {name: s.contact_force for name, s in states.items() if s.contact_force}
         stats["joint_stiffness_Nmm_per_rad"] = float(dg)
         return ArmState(
             activations=np.asarray(target, dtype=float).copy(),
@@ -323,11 +335,11 @@ class ArmModel(ArmBody):
         with its line of action (module muscle_unit)."""
         u = np.zeros_like(self.mesh.points)
         for muscle in self.spec.ordered_muscles():
-            unit = self.units[muscle.name]
-            insertion = self.forearm_point(muscle.insertion, theta_deg)
-            direction = (insertion - unit.origin) / np.linalg.norm(insertion - unit.origin)
+            state = states[muscle.name]
+            if abs(state.angle_deg - theta_deg) > 1e-9:
+                raise ValueError(f"{muscle.name}: a state at {state.angle_deg} deg placed at {theta_deg} deg")
             nodes = self.muscle_nodes[muscle.name]
-            u[nodes] = unit.positions(states[muscle.name], line_rotation(unit.direction, direction)) - self.mesh.points[nodes]
+            u[nodes] = self.units[muscle.name].positions(state) - self.mesh.points[nodes]
         return u
 
     def verify_equilibrium(self, state: ArmState) -> tuple[float, float]:

@@ -17,17 +17,10 @@ from persival.model.arm_file import Muscle, load_model_file
 from persival.model.assembly import MaterialField
 from persival.model.geometry import swept_solid_mesh
 from persival.model.mesh import Tet10Mesh
+from persival.model.rotations import rotation_about
 from persival.model.state_cache import cached_mesh
 
 __all__ = ["ArmBody", "muscle_profile", "rotation_about"]
-
-
-def rotation_about(axis: np.ndarray, theta_deg: float) -> np.ndarray:
-    """Rotation matrix about a unit axis (Rodrigues)."""
-    k = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    t = np.radians(theta_deg)
-    return np.eye(3) + np.sin(t) * K + (1.0 - np.cos(t)) * (K @ K)
 
 
 def muscle_profile(muscle: Muscle, s: np.ndarray, length: float) -> tuple[np.ndarray, np.ndarray]:

@@ -71,11 +71,16 @@ class Bone(_Strict):
     radius: float = Field(gt=0)
 
 
+class Contact(_Strict):
+    penalty: float = Field(1.0, gt=0, description="N/mm^3: contact pressure per mm of penetration (SPEC 3.3)")
+
+
 class Muscle(_Strict):
     name: str
     action: Literal["flexor", "extensor"]
     origin: Vector
     insertion: Vector
+    wraps: list[str] = Field(default_factory=list, description="bones the muscle slides over (frictionless contact)")
     via: list[Vector] = Field(default_factory=list, description="centre-line points, upper-arm frame")
     mesh_angle_deg: float = Field(description="elbow angle of the stress-free mesh pose")
     bow: float = Field(0.0, ge=0, description="mm: sagitta of a sine bow of the centre line away from the hinge")
@@ -118,6 +123,7 @@ class ArmModelFile(_Strict):
     description: str = ""
     joint: Joint = Joint()
     forearm: Forearm = Forearm()
+    contact: Contact = Contact()
     bones: list[Bone]
     muscles: list[Muscle]
     profiles: dict[str, Profile]
@@ -142,15 +148,28 @@ class ArmModelFile(_Strict):
             if bone.segment != "upper_arm":
                 continue
             for m in self.muscles:
+                if m.wraps and bone.name not in m.wraps:
+                    continue  # a bone the muscle does not touch (no contact with it)
                 d = _distance_to_segment(np.array(m.origin), np.array(bone.start), np.array(bone.end))
                 if d < 0.9 * bone.radius:
                     raise ValueError(
                         f"muscle {m.name!r}: origin {m.origin} lies inside bone {bone.name!r} "
                         f"({d:.1f} mm from its axis, radius {bone.radius} mm)"
                     )
+        bone_names = [b.name for b in self.bones]
+        for m in self.muscles:
+            unknown = [b for b in m.wraps if b not in bone_names]
+            if unknown:
+                raise ValueError(f"muscle {m.name!r} wraps over unknown bone(s) {unknown}; the bones are {bone_names}")
         if not self.profiles:
             raise ValueError("at least one mesh profile is required")
         return self
+
+    def bone(self, name: str) -> Bone:
+        for b in self.bones:
+            if b.name == name:
+                return b
+        raise KeyError(name)
 
     def muscle(self, name: str) -> Muscle:
         for m in self.muscles:

@@ -36,8 +36,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from persival.model.arm_body import rotation_about
 from persival.model.mesh import Tet10Mesh
+from persival.model.rotations import rotation_about
 
 # the four 3-node sub-triangles of a 6-node face (corners 0-2, mid-sides 3 = (0,1), 4 = (1,2), 5 = (2,0))
 _SUB_TRIANGLES = np.array([[0, 3, 5], [1, 4, 3], [2, 5, 4], [3, 4, 5]])
@@ -261,6 +261,13 @@ class ObstacleContact:
         )
         G = sp.kron(self.interpolation[active], sp.identity(3), format="csr")  # dx_p/du
         return (self.interpolation.T @ f_p).ravel(), (G.T @ K_p @ G).tocsr()
+
+    def force(self, x: np.ndarray) -> np.ndarray:
+        """Residual contribution dPi_c/dx (n_dofs,) alone (SPEC 3.3 contact: f_p = -eps w g n)."""
+        f_p = np.zeros((self.interpolation.shape[0], 3))
+        for _, a, g, n, _ in self._pairs(x):
+            f_p[a] -= (self.penalty * self.weights[a] * g[a])[:, None] * n[a]
+        return (self.interpolation.T @ f_p).ravel()
 
     def penetration(self, x: np.ndarray) -> np.ndarray:
         """Largest penetration (mm, >= 0) of each contact point into any obstacle."""

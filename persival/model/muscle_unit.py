@@ -7,20 +7,29 @@ line direction d_ref to the current one d(theta); see :class:`~persival.model.co
 Because the law is objective and the muscles carry no body force, the deformed muscle at
 elbow angle theta is exactly the rigid motion ``x = O + Q(theta) (y - O)`` of the solution
 ``y`` of a simpler problem: origin face held in its mesh pose, insertion face translated along
-d_ref by ``L(theta) - L_mesh`` (L = |I - O|). A muscle's state therefore depends on two numbers,
-its origin-insertion length L and its activation a, and its work on the joint is
-``T dL/dtheta`` with the tension ``T = dPi/dL`` (the axial reaction of the insertion face).
-The rigid rotation does no work (the muscle's own moment balance), so nothing is lost.
+d_ref by ``L(theta) - L_mesh`` (L = |I - O|), and the bones the muscle wraps over (SPEC 3.3
+contact) turned into that frame by ``Q(theta)^T`` about O. A muscle's state therefore depends on
+two numbers, the elbow angle theta and its activation a, and nothing of the other muscles.
+
+Its work on the joint follows from the envelope theorem applied to
+``Pi*(theta) = min_y [Pi_m(y; L(theta)) + Pi_c(y; theta)]``:
+
+    dPi*/dtheta = T dL/dtheta + dPi_c/dtheta|_y,        M = -dPi*/dtheta (flexion positive)
+
+with the tension ``T`` (the axial reaction of the insertion face). Without contact the second
+term vanishes and the state depends on L alone. The rigid rotation does no work (the muscle's
+own moment balance), so nothing is lost.
 
 This turns the joint equilibrium into one scalar equation in theta (see ArmModel), and each
 muscle into a small FE problem solved on its own: five solves of a few thousand DOFs instead
-of one of all of them, and a table of solved (L, a) states per muscle that warm-starts every
-new state by interpolation.
+of one of all of them, and a library of solved (theta, a) states per muscle that warm-starts
+every new state by interpolation.
 """
 
 from __future__ import annotations
 
 import bisect
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from itertools import pairwise
 
@@ -28,61 +37,68 @@ import numpy as np
 
 from persival.model.assembly import MaterialField, Tet10Assembler
 from persival.model.constraints import Dirichlet
+from persival.model.contact import ObstacleContact
 from persival.model.mesh import Tet10Mesh
+from persival.model.rotations import line_rotation
 from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
 
 
 @dataclass
 class MuscleState:
-    """Equilibrium of one muscle at origin-insertion length ``length`` and activation ``activation``."""
+    """Equilibrium of one muscle at elbow angle ``angle_deg`` and activation ``activation``."""
 
-    length: float  # mm, |I - O|
+    angle_deg: float
+    length: float  # mm, |I - O| at angle_deg
     activation: float
     displacement: np.ndarray  # (n_nodes, 3) mm, in the muscle's mesh-pose frame
-    tension: float  # N, dPi/dL: positive when the muscle pulls its ends together
-    stiffness: float  # N/mm, dT/dL with the interior re-equilibrated (Schur complement)
+    tension: float  # N, axial reaction of the insertion face: positive when the muscle pulls its ends together
+    moment: float  # N mm about the hinge, flexion positive: -dPi*/dtheta (module docstring)
+    moment_slope: float  # N mm/rad, dM/dtheta with the interior re-equilibrated (Schur complement)
     max_volume_change: float
     iterations: int = 0
-    # du/dL (n_nodes, 3) mm/mm at fixed activation, the interior re-equilibrated: the slope of
-    # the state along its length (cubic Hermite guesses between tabulated states); None if unknown
+    # du/dtheta (n_nodes, 3) mm/rad at fixed activation, the interior re-equilibrated: the slope of
+    # the state along theta (cubic Hermite guesses between tabulated states); None if unknown
     sensitivity: np.ndarray | None = None
+    contact_force: float = 0.0  # N, total normal force of the bones on the muscle
+    max_penetration: float = 0.0  # mm, deepest muscle node inside a bone
 
 
-def line_rotation(d_ref: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """The minimal rotation taking unit vector d_ref to unit vector d (the Hinge's face rotation).
+@dataclass(frozen=True)
+class MusclePath:
+    """Where a muscle's ends and bones are at elbow angle theta (deg): the arm's kinematics.
 
-    Q = I + [v]x + [v]x^2 / (1 + cos), v = d_ref x d.
+    ``geometry(theta) -> (L, dL/dtheta, d2L/dtheta2)`` (mm, per radian); ``insertion(theta)``
+    the world insertion point; ``bones(theta)`` the rigid obstacles (world frame) the muscle
+    wraps over, with the penalty ``penalty`` (N/mm^3; SPEC 3.3 contact); none: no contact.
     """
-    v = np.cross(d_ref, d)
-    c = float(d_ref @ d)
-    if c <= -1.0 + 1e-12:
-        raise ValueError("the line of action reversed its direction")
-    V = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-    return np.eye(3) + V + V @ V / (1.0 + c)
+
+    origin: np.ndarray
+    insertion: Callable[[float], np.ndarray]
+    geometry: Callable[[float], tuple[float, float, float]]
+    mesh_angle_deg: float
+    bones: Callable[[float], Sequence] | None = None
+    penalty: float = 0.0
 
 
 class MuscleUnit:
-    """The FE problem of one muscle with its length and activation prescribed."""
+    """The FE problem of one muscle with its elbow angle and activation prescribed."""
 
     small_step_mm = 1.0  # length changes up to this are taken in one load step (then halved if needed)
-    library_gap_mm = 8.0  # solved states at most this far apart are interpolated as a start
-    library_spacing_mm = 0.25  # a new state this close to a kept one is not kept
+    small_step_deg = 5.0  # ... if the angle moves no more than this either (the bones move with it)
+    library_gap_deg = 10.0  # solved states at most this far apart are interpolated as a start
+    library_spacing_deg = 0.2  # a new state this close to a kept one is not kept
     library_size = 600  # states kept per muscle (each n_nodes x 3 floats)
+    contact_step_deg = 0.05  # central differences of the contact energy in theta (exact up to ~1e-6)
 
-    def __init__(
-        self,
-        name: str,
-        mesh: Tet10Mesh,
-        material: MaterialField,
-        origin: np.ndarray,
-        insertion: np.ndarray,
-        options: SolverOptions | None = None,
-    ) -> None:
+    def __init__(self, name: str, mesh: Tet10Mesh, material: MaterialField, path: MusclePath,
+                 options: SolverOptions | None = None) -> None:
         self.name = name
         self.mesh = mesh
         self.material = material
-        self.origin = np.asarray(origin, dtype=float)
-        axis = np.asarray(insertion, dtype=float) - self.origin
+        self.path = path
+        self.origin = np.asarray(path.origin, dtype=float)
+        self.mesh_angle_deg = float(path.mesh_angle_deg)
+        axis = np.asarray(path.insertion(self.mesh_angle_deg), dtype=float) - self.origin
         self.mesh_length = float(np.linalg.norm(axis))
         if self.mesh_length <= 0:
             raise ValueError(f"muscle {name!r}: origin and insertion coincide")
@@ -90,12 +106,16 @@ class MuscleUnit:
         self.assembler = Tet10Assembler(mesh)
         self._origin_face = Dirichlet("origin", mesh.node_sets["origin"])
         self._insertion_face = Dirichlet("insertion", mesh.node_sets["insertion"])
+        self.contact = None
+        if path.bones is not None and len(path.bones(self.mesh_angle_deg)):
+            tied = np.concatenate([self._origin_face.nodes, self._insertion_face.nodes])
+            self.contact = ObstacleContact.at_nodes(mesh, self.obstacles(self.mesh_angle_deg), path.penalty, exclude=tied)
         self.solver = QuasiStaticSolver(mesh, material, [self._origin_face, self._insertion_face], options,
-                                        assembler=self.assembler)
+                                        assembler=self.assembler, extra_terms=[self.contact] if self.contact else None)
         # the insertion face's unit axial translation: dx/dL of the constrained DOFs
         self._axial = np.zeros(self.assembler.n_dofs)
         self._axial[self._insertion_face.dofs] = np.tile(self.direction, len(self._insertion_face.nodes))
-        # solved states by activation, sorted by length: starts for later solves (_from_library)
+        # solved states by activation, sorted by angle: starts for later solves (_from_library)
         self._library: dict[float, list[MuscleState]] = {}
 
     @property
@@ -106,8 +126,38 @@ class MuscleUnit:
     def options(self, value: SolverOptions) -> None:
         self.solver.options = value
 
+    # -- kinematics ------------------------------------------------------------------------------
+    def length(self, theta_deg: float) -> float:
+        return float(self.path.geometry(theta_deg)[0])
+
+    def rotation(self, theta_deg: float) -> np.ndarray:
+        """Q(theta): the minimal rotation of the mesh-pose line of action onto the current one."""
+        d = np.asarray(self.path.insertion(theta_deg), dtype=float) - self.origin
+        return line_rotation(self.direction, d / np.linalg.norm(d))
+
+    def obstacles(self, theta_deg: float) -> list:
+        """The bones at theta in the muscle's mesh-pose frame: turned by Q(theta)^T about O."""
+        if self.path.bones is None:
+            return []
+        back = self.rotation(theta_deg).T
+        return [bone.transformed(back, self.origin) for bone in self.path.bones(theta_deg)]
+
+    def positions(self, state: MuscleState) -> np.ndarray:
+        """World node positions of a state: its solution turned with the line of action."""
+        y = self.mesh.points + state.displacement
+        return self.origin + (y - self.origin) @ self.rotation(state.angle_deg).T
+
+    def _set_path(self, theta_from: float, theta_to: float) -> None:
+        """The load steps' path: insertion face from L(theta_from) to L(theta_to), bones along."""
+        self._insertion_face.start[:] = (self.length(theta_from) - self.mesh_length) * self.direction
+        self._insertion_face.end[:] = (self.length(theta_to) - self.mesh_length) * self.direction
+        if self.contact is not None:
+            self.contact.pose = lambda t: self.obstacles(theta_from + t * (theta_to - theta_from))
+            self.contact.set_load_factor(0.0)
+
+    # -- solves ----------------------------------------------------------------------------------
     def rest_state(self, progress=None) -> MuscleState:
-        """The passive equilibrium at the mesh length (activation 0), solved once.
+        """The passive equilibrium at the mesh pose (activation 0), solved once.
 
         With a fibre prestretch lambda_0 > 1 the mesh pose carries a small passive fibre
         stress (SPEC 3.3) and is not yet in equilibrium. Newton from the mesh pose can fail
@@ -118,84 +168,83 @@ class MuscleUnit:
         if getattr(self, "_rest", None) is None:
             u = np.zeros((self.mesh.n_nodes, 3))
             full = self.material
+            self._set_path(self.mesh_angle_deg, self.mesh_angle_deg)
             try:
                 for before, share in pairwise((0.0, 0.6, 0.8, 0.9, 0.95, 0.98, 1.0)):
                     self.solver.material = replace(full, fibre_prestretch=1.0 + share * (full.fibre_prestretch - 1.0))
-                    self._insertion_face.start[:] = 0.0
-                    self._insertion_face.end[:] = 0.0
                     step = None if progress is None else (lambda t, a=before, b=share: progress(a + t * (b - a)))
                     u = self.solver.solve(0.0, initial_displacement=u, progress=step).displacement
             except ConvergenceError as exc:
                 raise ConvergenceError(f"muscle {self.name!r}: the prestressed mesh pose has no equilibrium: {exc}") from exc
             finally:
                 self.solver.material = full
-            F = self.assembler.deformation_gradient(u.ravel())
-            tension, stiffness, slope = self._stiffness(u, 0.0)
-            self._rest = MuscleState(self.mesh_length, 0.0, u, tension, stiffness, float(np.abs(np.linalg.det(F) - 1).max()),
-                                     sensitivity=slope)
+            self._rest = self.response(self.mesh_angle_deg, 0.0, u)
         return self._rest
 
-    def solve(self, length: float, activation: float, start: MuscleState | None = None, progress=None,
+    def solve(self, theta_deg: float, activation: float, start: MuscleState | None = None, progress=None,
               fresh_slope: bool = True) -> MuscleState:
-        """Equilibrium at (length, activation), continued from ``start`` (default: the mesh pose).
+        """Equilibrium at (theta, activation), continued from ``start`` (default: the rest state).
 
-        The insertion face moves from the start length to ``length`` while the activation
-        moves along: the solver's load stepping is the continuation. ``progress(t)`` is called
-        after every accepted load step (persival.model.progress); it changes nothing solved.
-        ``fresh_slope=False``: a state within ``small_step_mm`` of a start with known slope
-        keeps the start's stiffness and du/dL (a chord: the joint iteration's last corrections
-        need its tension, exact, but not a factorization for a derivative that barely moved).
+        The insertion face (and the bones) move from the start's angle to ``theta_deg`` while
+        the activation moves along: the solver's load stepping is the continuation.
+        ``progress(t)`` is called after every accepted load step (persival.model.progress); it
+        changes nothing solved. ``fresh_slope=False``: a state within ``small_step_mm`` of a start
+        with known slope keeps the start's moment slope and du/dtheta (a chord: the joint
+        iteration's last corrections need its moment, exact, but not a factorization for a
+        derivative that barely moved).
         """
-        if not np.isfinite(length) or length <= 0:
-            raise ValueError(f"muscle {self.name!r}: length must be positive, got {length}")
+        if not np.isfinite(theta_deg):
+            raise ValueError(f"muscle {self.name!r}: the elbow angle must be finite, got {theta_deg}")
+        theta_deg, activation = float(theta_deg), float(activation)
         start = start or self.rest_state(progress)
-        if start.length == length and start.activation == activation and np.isfinite(start.tension):
-            if start.sensitivity is None:  # e.g. a rest state from an older cache: complete it
-                start = replace(start, sensitivity=self._stiffness(start.displacement, activation)[2])
+        if start.angle_deg == theta_deg and start.activation == activation and np.isfinite(start.moment):
+            if start.sensitivity is None:  # e.g. a state from an older cache: complete it
+                start = self.response(theta_deg, activation, start.displacement)
             return start  # already the equilibrium there (e.g. the joint iteration's first angle)
-        near = abs(length - start.length) <= self.small_step_mm and activation == start.activation
+        near = (abs(self.length(theta_deg) - start.length) <= self.small_step_mm
+                and abs(theta_deg - start.angle_deg) <= self.small_step_deg and activation == start.activation)
         # a start this near (the joint iteration's corrections) beats any interpolation of kept
-        # states; with its slope du/dL the first-order predictor needs no factorization of its own
+        # states; with its slope du/dtheta the first-order predictor needs no factorization of its own
         if near and start.sensitivity is not None:
-            guess = start.displacement + (length - start.length) * start.sensitivity
-            state = self.solve_from_guess(float(length), float(activation), guess, progress, max_iterations=6,
+            guess = start.displacement + np.radians(theta_deg - start.angle_deg) * start.sensitivity
+            state = self.solve_from_guess(theta_deg, activation, guess, progress, max_iterations=6,
                                           slope_from=None if fresh_slope else start)
         else:
-            state = None if near else self._from_library(float(length), float(activation), progress)
+            state = None if near else self._from_library(theta_deg, activation, progress)
         if state is None:
-            state = self._continue(float(length), float(activation), start, progress=progress)
+            state = self._continue(theta_deg, activation, start, progress=progress)
         self._remember(state)
         return state
 
-    def _from_library(self, length: float, activation: float, progress=None) -> MuscleState | None:
+    def _from_library(self, theta_deg: float, activation: float, progress=None) -> MuscleState | None:
         """Newton from the interpolation of two solved states of the same activation that
-        bracket ``length`` (within ``library_gap_mm``); None if there are none or it fails.
+        bracket ``theta_deg`` (within ``library_gap_deg``); None if there are none or it fails.
 
-        Linear interpolation in L keeps the insertion face exactly where L puts it. Passive
-        muscles going slack are the expensive part of a state (a bowed muscle bending further:
-        100 to 200 Newton iterations by continuation); between solved neighbours it takes a few.
+        Passive muscles going slack are the expensive part of a state (a bowed muscle bending
+        further: 100 to 200 Newton iterations by continuation); between solved neighbours it
+        takes a few.
         """
         states = self._library.get(activation)
         if not states:
             return None
-        lengths = [s.length for s in states]
-        k = bisect.bisect_left(lengths, length)
+        angles = [s.angle_deg for s in states]
+        k = bisect.bisect_left(angles, theta_deg)
         if k == 0 or k == len(states):
             return None
         lo, hi = states[k - 1], states[k]
-        if hi.length - lo.length > self.library_gap_mm:
+        if hi.angle_deg - lo.angle_deg > self.library_gap_deg:
             return None
-        w = (length - lo.length) / (hi.length - lo.length)
-        return self.solve_from_guess(length, activation, (1.0 - w) * lo.displacement + w * hi.displacement, progress)
+        w = (theta_deg - lo.angle_deg) / (hi.angle_deg - lo.angle_deg)
+        return self.solve_from_guess(theta_deg, activation, (1.0 - w) * lo.displacement + w * hi.displacement, progress)
 
-    def solve_from_guess(self, length: float, activation: float, guess: np.ndarray, progress=None,
+    def solve_from_guess(self, theta_deg: float, activation: float, guess: np.ndarray, progress=None,
                          max_iterations: int = 12, slope_from: MuscleState | None = None) -> MuscleState | None:
-        """Plain Newton at (length, activation) from a guessed displacement (no load stepping);
+        """Plain Newton at (theta, activation) from a guessed displacement (no load stepping);
         None if it does not converge within ``max_iterations``. The guess's insertion face is
-        put where ``length`` puts it, so an interpolation of neighbouring states is a good guess.
-        ``slope_from``: take stiffness and du/dL from this nearby state (see :meth:`solve`).
+        put where theta puts it, so an interpolation of neighbouring states is a good guess.
+        ``slope_from``: take the moment slope and du/dtheta from this nearby state (see :meth:`solve`).
         """
-        self._insertion_face.start[:] = self._insertion_face.end[:] = (length - self.mesh_length) * self.direction
+        self._set_path(theta_deg, theta_deg)
         options = self.solver.options
         self.solver.options = replace(options, initial_step=1.0, min_step=1.0,
                                       max_iterations=min(options.max_iterations, max_iterations))
@@ -207,25 +256,26 @@ class MuscleUnit:
         finally:
             self.solver.options = options
         if slope_from is not None:
-            return MuscleState(length, activation, solution.displacement, self._tension(solution), slope_from.stiffness,
-                               solution.max_volume_change, solution.statistics.iterations, slope_from.sensitivity)
-        return self._state(length, activation, solution)
+            state = self._scalars(theta_deg, activation, solution.displacement, self._tension(solution))
+            return replace(state, moment_slope=slope_from.moment_slope, sensitivity=slope_from.sensitivity,
+                           max_volume_change=solution.max_volume_change, iterations=solution.statistics.iterations)
+        return self._state(theta_deg, activation, solution)
 
     def _remember(self, state: MuscleState) -> None:
         states = self._library.setdefault(state.activation, [])
-        lengths = [s.length for s in states]
-        k = bisect.bisect_left(lengths, state.length)
-        near = [s for s in states[max(k - 1, 0) : k + 1] if abs(s.length - state.length) < self.library_spacing_mm]
+        angles = [s.angle_deg for s in states]
+        k = bisect.bisect_left(angles, state.angle_deg)
+        near = [s for s in states[max(k - 1, 0) : k + 1] if abs(s.angle_deg - state.angle_deg) < self.library_spacing_deg]
         if near or sum(len(v) for v in self._library.values()) >= self.library_size:
             return
         states.insert(k, state)
 
-    def _continue(self, length: float, activation: float, start: MuscleState, detour: bool = True,
+    def _continue(self, theta_deg: float, activation: float, start: MuscleState, detour: bool = True,
                   progress=None) -> MuscleState:
-        self._insertion_face.start[:] = (start.length - self.mesh_length) * self.direction
-        self._insertion_face.end[:] = (length - self.mesh_length) * self.direction
+        self._set_path(start.angle_deg, theta_deg)
         options = self.solver.options
-        if abs(length - start.length) <= self.small_step_mm and activation == start.activation:
+        if (abs(self.length(theta_deg) - start.length) <= self.small_step_mm and activation == start.activation
+                and abs(theta_deg - start.angle_deg) <= self.small_step_deg):
             # the joint iteration's late corrections: one load step, Newton from the last state
             self.solver.options = replace(options, initial_step=1.0)
         try:
@@ -236,54 +286,97 @@ class MuscleUnit:
         except ConvergenceError as exc:
             failure = exc
         else:
-            return self._state(length, activation, solution)
+            return self._state(theta_deg, activation, solution)
         finally:
             self.solver.options = options
-        if detour and activation != start.activation and start.length != self.mesh_length:
+        if detour and activation != start.activation and start.angle_deg != self.mesh_angle_deg:
             # Activating a slack, bowed muscle at fixed ends can snap through (the bow pulls
             # straight), where load stepping stalls. The same state is reached without a limit
-            # point from the straight mesh pose: activate there first, then change the length.
+            # point from the straight mesh pose: activate there first, then change the angle.
             # A fallback, not a guarantee (on the coarse mesh isometric activation at the mesh
             # pose itself stalls for the biceps and the brachioradialis): if it fails too, the
             # error reports the direct path.
             try:
-                taut = self._continue(self.mesh_length, activation, self.rest_state(), detour=False, progress=progress)
-                return self._continue(length, activation, taut, detour=False, progress=progress)
+                taut = self._continue(self.mesh_angle_deg, activation, self.rest_state(), detour=False, progress=progress)
+                return self._continue(theta_deg, activation, taut, detour=False, progress=progress)
             except ConvergenceError:
                 pass
         raise ConvergenceError(
-            f"muscle {self.name!r} from length {start.length:.1f} mm, activation {start.activation:.2f} "
-            f"to {length:.1f} mm, {activation:.2f}: {failure}"
+            f"muscle {self.name!r} from {start.angle_deg:.1f} deg, activation {start.activation:.2f} "
+            f"to {theta_deg:.1f} deg, {activation:.2f}: {failure}"
         ) from failure
 
-    def _state(self, length: float, activation: float, solution) -> MuscleState:
-        if solution.tangent is not None:  # the converged tangent, preconditioned by the last factorization
-            tension = self._tension(solution)
-            stiffness, slope = self.solver.condensed_response(solution.tangent, self._axial, reuse_factorization=True)
-            slope = slope.reshape(-1, 3)
-        else:
-            tension, stiffness, slope = self._stiffness(solution.displacement, activation)
-        return MuscleState(
-            length, activation, solution.displacement, tension, stiffness,
-            solution.max_volume_change, solution.statistics.iterations, slope,
-        )
+    # -- the state's response: moment, its slope and du/dtheta -------------------------------------
+    def _state(self, theta_deg: float, activation: float, solution) -> MuscleState:
+        """The converged solution's state; its tangent (preconditioned by the last factorization)
+        gives the moment slope and du/dtheta without a factorization of its own."""
+        state = self.response(theta_deg, activation, solution.displacement, solution.tangent, self._tension(solution))
+        return replace(state, max_volume_change=solution.max_volume_change, iterations=solution.statistics.iterations)
+
+    def response(self, theta_deg: float, activation: float, displacement: np.ndarray, K=None,
+                 tension: float | None = None) -> MuscleState:
+        """The state of an equilibrium u at (theta, a): tension, moment M = -dPi*/dtheta, its slope
+        and du/dtheta (SPEC 3.3; module docstring). With theta moving, the insertion face moves by
+        ``L' g`` (g: the axial unit motion) and the bones' forces change at fixed u by ``df_c/dtheta``:
+
+            K_ff du_f = -(K L' g + df_c/dtheta)_f,
+            dPi*/dtheta = T L' + P,  P = dPi_c/dtheta|_u
+            d2Pi*/dtheta2 = g.K du L' + T L'' + df_c/dtheta . du + dP/dtheta|_u
+
+        (the contact terms by central differences of the cheap contact energy and force in theta).
+        """
+        u = np.asarray(displacement, dtype=float)
+        reuse = K is not None
+        if K is None:
+            self._set_path(theta_deg, theta_deg)
+            K, f = self.solver.tangent(u.ravel(), np.full(self.mesh.n_cells, activation))
+            tension = float(self._axial @ f)
+        L, dL, d2L = self.path.geometry(theta_deg)
+        P, dP, rate = self._contact_rates(theta_deg, u)
+        S, du = self.solver.condensed_response(K, dL * self._axial, reuse_factorization=reuse, force_rate=rate)
+        work_slope = S + tension * d2L + dP + (0.0 if rate is None else float(rate @ du))
+        state = self._scalars(theta_deg, activation, u, tension, contact_work=P)
+        F = self.assembler.deformation_gradient(u.ravel())
+        return replace(state, moment_slope=-float(work_slope), sensitivity=du.reshape(-1, 3),
+                       max_volume_change=float(np.abs(np.linalg.det(F) - 1).max()))
+
+    def _scalars(self, theta_deg: float, activation: float, u: np.ndarray, tension: float,
+                 contact_work: float | None = None) -> MuscleState:
+        """A state with its exact moment (no slope yet): -(T L' + dPi_c/dtheta)."""
+        L, dL, _ = self.path.geometry(theta_deg)
+        if contact_work is None:
+            contact_work = self._contact_rates(theta_deg, u, slopes=False)[0]
+        force, depth = 0.0, 0.0
+        if self.contact is not None:
+            x = self.mesh.points + u
+            self.contact.obstacles = tuple(self.obstacles(theta_deg))
+            force = float(np.linalg.norm(self.contact.force(x).reshape(-1, 3), axis=1).sum())
+            depth = float(self.contact.penetration(x).max(initial=0.0))
+        return MuscleState(theta_deg, float(L), activation, u, float(tension), -float(tension * dL + contact_work),
+                           float("nan"), 0.0, contact_force=force, max_penetration=depth)
+
+    def _contact_rates(self, theta_deg: float, u: np.ndarray, slopes: bool = True):
+        """P = dPi_c/dtheta|_u (N mm/rad), dP/dtheta|_u and df_c/dtheta|_u (n_dofs,) by central
+        differences in theta (zeros and None without bones)."""
+        if self.contact is None:
+            return 0.0, 0.0, None
+        x = self.mesh.points + u
+        h = np.radians(self.contact_step_deg)
+        energy, force = [], []
+        for step in (-1, 0, 1) if slopes else (-1, 1):
+            self.contact.obstacles = tuple(self.obstacles(theta_deg + step * self.contact_step_deg))
+            energy.append(self.contact.energy(x))
+            if slopes and step:
+                force.append(self.contact.force(x))
+        self.contact.obstacles = tuple(self.obstacles(theta_deg))
+        P = (energy[-1] - energy[0]) / (2 * h)
+        if not slopes:
+            return P, 0.0, None
+        return P, (energy[2] - 2 * energy[1] + energy[0]) / h**2, (force[1] - force[0]) / (2 * h)
 
     def _tension(self, solution) -> float:
-        """T = dPi/dL: the axial part of the insertion face's reaction (what _stiffness sums)."""
+        """T: the axial part of the insertion face's reaction."""
         return float(self.direction @ solution.reactions["insertion"].force)
 
-    def _stiffness(self, displacement: np.ndarray, activation: float) -> tuple[float, float, np.ndarray]:
-        """Tension dPi/dL, axial stiffness dT/dL = g.K.g - (K g)_f . K_ff^-1 (K g)_f and the
-        sensitivity du/dL (n_nodes, 3) of the same solve."""
-        per_cell = np.full(self.mesh.n_cells, activation)
-        K, f = self.assembler.tangent(np.asarray(displacement).ravel(), self.material, per_cell)
-        stiffness, slope = self.solver.condensed_response(K, self._axial)
-        return float(self._axial @ f), stiffness, slope.reshape(-1, 3)
 
-    def positions(self, state: MuscleState, rotation: np.ndarray) -> np.ndarray:
-        """World node positions of a state whose line of action is turned by ``rotation``."""
-        y = self.mesh.points + state.displacement
-        return self.origin + (y - self.origin) @ rotation.T
-
-
-__all__ = ["ConvergenceError", "MuscleState", "MuscleUnit", "line_rotation"]
+__all__ = ["ConvergenceError", "MusclePath", "MuscleState", "MuscleUnit", "line_rotation"]

@@ -261,8 +261,8 @@ class QuasiStaticSolver:
         self.linear_solver.factorize(self._free_upper(K))
         return r_theta, float(k_tt - k_ft @ self.linear_solver.solve(k_ft))
 
-    def condensed_response(self, K: sp.csr_matrix, g: np.ndarray, reuse_factorization: bool = False
-                           ) -> tuple[float, np.ndarray]:
+    def condensed_response(self, K: sp.csr_matrix, g: np.ndarray, reuse_factorization: bool = False,
+                           force_rate: np.ndarray | None = None) -> tuple[float, np.ndarray]:
         """Stiffness along a motion ``s g`` of the constrained DOFs with the free DOFs
         re-equilibrated, the Schur complement ``g.K.g - (K g)_f . K_ff^-1 (K g)_f``, and the
         equilibrium's sensitivity du/ds (n_dofs,): g on the constrained DOFs, ``-K_ff^-1 (K g)_f``
@@ -274,13 +274,19 @@ class QuasiStaticSolver:
         so its last factorization is of the tangent one converged Newton step earlier; that one
         preconditions a few steps of iterative refinement against K instead of a factorization
         of its own (the biceps of the quick mesh: 0.10 s per factorization, 0.03 s per solve).
-        Falls back to factorizing when the refinement stalls."""
+        Falls back to factorizing when the refinement stalls.
+
+        ``force_rate``: the residual's own rate ds of change at fixed u (n_dofs,; e.g. obstacles
+        moving with s, SPEC 3.3 contact): the free DOFs then solve ``K_ff du_f = -(K g + df/ds)_f``,
+        and the first value is still ``g . K du`` (the rate of the constrained DOFs' reaction
+        along g)."""
         Kg = symmetric_matvec(K, g)
         k_f = Kg[self.free]
-        x = self._refined_solve(K, k_f) if reuse_factorization and self._factor_is_recent else None
+        b = k_f if force_rate is None else k_f + np.asarray(force_rate, dtype=float)[self.free]
+        x = self._refined_solve(K, b) if reuse_factorization and self._factor_is_recent else None
         if x is None:
             self.linear_solver.factorize(self._free_upper(K))
-            x = self.linear_solver.solve(k_f)
+            x = self.linear_solver.solve(b)
         du = np.asarray(g, dtype=float).copy()
         du[self.free] = -x
         return float(g @ Kg - k_f @ x), du

@@ -54,18 +54,18 @@ def model_cache_dir(arm) -> Path:
 
 def _state_arrays(prefix: str, state: MuscleState) -> dict:
     arrays = {f"{prefix}/displacement": state.displacement,
-              f"{prefix}/scalars": np.array([state.length, state.activation, state.tension, state.stiffness,
-                                             state.max_volume_change, state.iterations], dtype=float)}
+              f"{prefix}/scalars": np.array([state.angle_deg, state.length, state.activation, state.tension, state.moment,
+                                             state.moment_slope, state.max_volume_change, state.iterations], dtype=float)}
     if state.sensitivity is not None:
         arrays[f"{prefix}/sensitivity"] = state.sensitivity
     return arrays
 
 
 def _state(data, prefix: str) -> MuscleState:
-    length, activation, tension, stiffness, max_j, iterations = data[f"{prefix}/scalars"]
+    angle, length, activation, tension, moment, moment_slope, max_j, iterations = data[f"{prefix}/scalars"]
     slope = np.array(data[f"{prefix}/sensitivity"]) if f"{prefix}/sensitivity" in data.files else None
-    return MuscleState(float(length), float(activation), np.array(data[f"{prefix}/displacement"]), float(tension),
-                       float(stiffness), float(max_j), int(iterations), slope)
+    return MuscleState(float(angle), float(length), float(activation), np.array(data[f"{prefix}/displacement"]),
+                       float(tension), float(moment), float(moment_slope), float(max_j), int(iterations), slope)
 
 
 def save_states(path: Path, header: dict, groups: dict[str, dict[str, MuscleState]]) -> Path:
