@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from persival.campaign.moment_table import MomentTable, TableMismatchError, check_grids, empty_moment_table, sweep_muscle
-from persival.model.muscle_unit import MuscleState
+from persival.model.muscle_state import MuscleState
 from persival.model.state_cache import mesh_fingerprint
 from persival.vocabulary import MUSCLES
 

@@ -25,7 +25,8 @@ import numpy as np
 from scipy.optimize import brentq
 
 from persival.campaign.response_table import ResponseTable
-from persival.model.muscle_unit import ConvergenceError, MuscleState
+from persival.model.muscle_state import MuscleState
+from persival.model.muscle_unit import ConvergenceError
 from persival.vocabulary import MUSCLES, check_activation_vector
 
 __all__ = ["TableSolver", "OutsideTableError"]

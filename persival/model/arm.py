@@ -23,7 +23,8 @@ from persival.model.assembly import MaterialField
 from persival.model.constraints import Hinge
 from persival.model.contact import bone_obstacles
 from persival.model.mesh import Tet10Mesh
-from persival.model.muscle_unit import MusclePath, MuscleState, MuscleUnit
+from persival.model.muscle_state import MusclePath, MuscleState
+from persival.model.muscle_unit import MuscleUnit
 from persival.model.progress import SolveTracker
 from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
 from persival.model.state_cache import load_states, model_cache_dir, save_states

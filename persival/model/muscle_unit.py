@@ -29,8 +29,7 @@ every new state by interpolation.
 from __future__ import annotations
 
 import bisect
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from itertools import pairwise
 
 import numpy as np
@@ -39,45 +38,9 @@ from persival.model.assembly import MaterialField, Tet10Assembler
 from persival.model.constraints import Dirichlet
 from persival.model.contact import ObstacleContact
 from persival.model.mesh import Tet10Mesh
+from persival.model.muscle_state import MusclePath, MuscleState
 from persival.model.rotations import line_rotation
 from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
-
-
-@dataclass
-class MuscleState:
-    """Equilibrium of one muscle at elbow angle ``angle_deg`` and activation ``activation``."""
-
-    angle_deg: float
-    length: float  # mm, |I - O| at angle_deg
-    activation: float
-    displacement: np.ndarray  # (n_nodes, 3) mm, in the muscle's mesh-pose frame
-    tension: float  # N, axial reaction of the insertion face: positive when the muscle pulls its ends together
-    moment: float  # N mm about the hinge, flexion positive: -dPi*/dtheta (module docstring)
-    moment_slope: float  # N mm/rad, dM/dtheta with the interior re-equilibrated (Schur complement)
-    max_volume_change: float
-    iterations: int = 0
-    # du/dtheta (n_nodes, 3) mm/rad at fixed activation, the interior re-equilibrated: the slope of
-    # the state along theta (cubic Hermite guesses between tabulated states); None if unknown
-    sensitivity: np.ndarray | None = None
-    contact_force: float = 0.0  # N, total normal force of the bones on the muscle
-    max_penetration: float = 0.0  # mm, deepest muscle node inside a bone
-
-
-@dataclass(frozen=True)
-class MusclePath:
-    """Where a muscle's ends and bones are at elbow angle theta (deg): the arm's kinematics.
-
-    ``geometry(theta) -> (L, dL/dtheta, d2L/dtheta2)`` (mm, per radian); ``insertion(theta)``
-    the world insertion point; ``bones(theta)`` the rigid obstacles (world frame) the muscle
-    wraps over, with the penalty ``penalty`` (N/mm^3; SPEC 3.3 contact); none: no contact.
-    """
-
-    origin: np.ndarray
-    insertion: Callable[[float], np.ndarray]
-    geometry: Callable[[float], tuple[float, float, float]]
-    mesh_angle_deg: float
-    bones: Callable[[float], Sequence] | None = None
-    penalty: float = 0.0
 
 
 class MuscleUnit:

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.model.muscle_unit import MuscleState
+from persival.model.muscle_state import MuscleState
 
 __all__ = ["cache_root", "model_cache_dir", "mesh_fingerprint", "save_states", "load_states", "cached_mesh"]
 
