@@ -208,6 +208,11 @@ class MuscleUnit:
         ``slope_from``: take the moment slope and du/dtheta from this nearby state (see :meth:`solve`).
         """
         self._set_path(theta_deg, theta_deg)
+        # the faces exactly where theta puts them: an extrapolation in theta misses the insertion's
+        # L(theta) at second order, and a face jump costs the solver a predictor solve
+        guess = np.array(guess, dtype=float, copy=True)
+        guess[self._origin_face.nodes] = 0.0
+        guess[self._insertion_face.nodes] = self._insertion_face.end
         options = self.solver.options
         self.solver.options = replace(options, initial_step=1.0, min_step=1.0,
                                       max_iterations=min(options.max_iterations, max_iterations))
@@ -298,10 +303,12 @@ class MuscleUnit:
         P, dP, rate = self._contact_rates(theta_deg, u)
         S, du = self.solver.condensed_response(K, dL * self._axial, reuse_factorization=reuse, force_rate=rate)
         work_slope = S + tension * d2L + dP + (0.0 if rate is None else float(rate @ du))
-        state = self._scalars(theta_deg, activation, u, tension, contact_work=P)
+        state = replace(self._scalars(theta_deg, activation, u, tension, contact_work=P),
+                        moment_slope=-float(work_slope), sensitivity=du.reshape(-1, 3))
+        if reuse:  # a solver's solution: the caller takes max |J - 1| from it
+            return state
         F = self.assembler.deformation_gradient(u.ravel())
-        return replace(state, moment_slope=-float(work_slope), sensitivity=du.reshape(-1, 3),
-                       max_volume_change=float(np.abs(np.linalg.det(F) - 1).max()))
+        return replace(state, max_volume_change=float(np.abs(np.linalg.det(F) - 1).max()))
 
     def _scalars(self, theta_deg: float, activation: float, u: np.ndarray, tension: float,
                  contact_work: float | None = None) -> MuscleState:
