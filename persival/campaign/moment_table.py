@@ -56,18 +56,22 @@ def _next_state(unit, theta_deg: float, activation: float, state, previous):
     """The next state of a sweep: Newton from an extrapolation of the last states (their shapes
     change smoothly with the angle), else load-stepped continuation from the last.
 
-    The extrapolation is the quadratic through the last state, its slope du/dtheta and the one
-    before (the tangent line when there is none before). Why: a slack, bowed muscle shortened by
+    The extrapolation is the quadratic through the last state, its slope and the one before (the
+    tangent line when there is none before), in the unit's chart (``MuscleUnit.chart``: the length
+    for a muscle without bones, whose state depends on L alone; coarse brachioradialis at a = 0.5:
+    378 Newton iterations for the sweep against 440 extrapolating in theta). Why: a slack, bowed muscle shortened by
     9 mm took 100 to 200 Newton iterations by load stepping from the last state (coarse
     brachioradialis, profiled); from the extrapolated shape a few. The solve puts the guess's
     insertion face where theta puts it.
     """
-    step = np.radians(theta_deg - state.angle_deg)
+    chart, ds = unit.chart(state.angle_deg)
+    step = chart(theta_deg) - chart(state.angle_deg)
     if step != 0.0:  # every MuscleUnit state carries its slope
-        guess = state.displacement + step * state.sensitivity
-        if previous is not None and previous.angle_deg != state.angle_deg:
-            back = np.radians(previous.angle_deg - state.angle_deg)
-            curvature = (previous.displacement - state.displacement - back * state.sensitivity) / back**2
+        slope = state.sensitivity / ds
+        guess = state.displacement + step * slope
+        if previous is not None and chart(previous.angle_deg) != chart(state.angle_deg):
+            back = chart(previous.angle_deg) - chart(state.angle_deg)
+            curvature = (previous.displacement - state.displacement - back * slope) / back**2
             guess = guess + step**2 * curvature
         solved = unit.solve_from_guess(theta_deg, activation, guess, max_iterations=10)
         if solved is not None:

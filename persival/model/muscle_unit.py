@@ -29,6 +29,7 @@ every new state by interpolation.
 from __future__ import annotations
 
 import bisect
+from collections.abc import Callable
 from dataclasses import replace
 from itertools import pairwise
 
@@ -92,6 +93,18 @@ class MuscleUnit:
     # -- kinematics ------------------------------------------------------------------------------
     def length(self, theta_deg: float) -> float:
         return float(self.path.geometry(theta_deg)[0])
+
+    def chart(self, reference_deg: float) -> tuple[Callable[[float], float], float]:
+        """The coordinate s(theta) along which this muscle's states are smoothest near a reference
+        angle, and ds/dtheta there (per rad): its length L for a muscle without bones (its state
+        depends on L alone, however L turns with theta), theta itself (rad) with bones or where
+        L' vanishes (a state's du/dtheta = L' du/dL then tells nothing of du/dL). Extrapolations
+        from a state at ``reference_deg`` run in it."""
+        if self.contact is None:
+            _, dL, _ = self.path.geometry(reference_deg)
+            if abs(dL) > 1e-6:
+                return self.length, float(dL)
+        return (lambda theta: float(np.radians(theta))), 1.0
 
     def rotation(self, theta_deg: float) -> np.ndarray:
         """Q(theta): the minimal rotation of the mesh-pose line of action onto the current one."""
@@ -169,7 +182,8 @@ class MuscleUnit:
         # a start this near (the joint iteration's corrections) beats any interpolation of kept
         # states; with its slope du/dtheta the first-order predictor needs no factorization of its own
         if near and start.sensitivity is not None:
-            guess = start.displacement + np.radians(theta_deg - start.angle_deg) * start.sensitivity
+            chart, ds = self.chart(start.angle_deg)
+            guess = start.displacement + (chart(theta_deg) - chart(start.angle_deg)) / ds * start.sensitivity
             state = self.solve_from_guess(theta_deg, activation, guess, progress, max_iterations=6,
                                           slope_from=None if fresh_slope else start)
         else:
