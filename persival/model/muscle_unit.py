@@ -177,8 +177,7 @@ class MuscleUnit:
             if start.sensitivity is None:  # e.g. a state from an older cache: complete it
                 start = self.response(theta_deg, activation, start.displacement)
             return start  # already the equilibrium there (e.g. the joint iteration's first angle)
-        near = (abs(self.length(theta_deg) - start.length) <= self.small_step_mm
-                and abs(theta_deg - start.angle_deg) <= self.small_step_deg and activation == start.activation)
+        near = self._is_near(theta_deg, activation, start)
         # a start this near (the joint iteration's corrections) beats any interpolation of kept
         # states; with its slope du/dtheta the first-order predictor needs no factorization of its own
         if near and start.sensitivity is not None:
@@ -192,6 +191,11 @@ class MuscleUnit:
             state = self._continue(theta_deg, activation, start, progress=progress)
         self._remember(state)
         return state
+
+    def _is_near(self, theta_deg: float, activation: float, start: MuscleState) -> bool:
+        """A joint iteration's correction: same activation, within ``small_step_mm`` and ``small_step_deg``."""
+        return (activation == start.activation and abs(theta_deg - start.angle_deg) <= self.small_step_deg
+                and abs(self.length(theta_deg) - start.length) <= self.small_step_mm)
 
     def _from_library(self, theta_deg: float, activation: float, progress=None) -> MuscleState | None:
         """Newton from the interpolation of two solved states of the same activation that
@@ -256,8 +260,7 @@ class MuscleUnit:
                   progress=None) -> MuscleState:
         self._set_path(start.angle_deg, theta_deg)
         options = self.solver.options
-        if (abs(self.length(theta_deg) - start.length) <= self.small_step_mm and activation == start.activation
-                and abs(theta_deg - start.angle_deg) <= self.small_step_deg):
+        if self._is_near(theta_deg, activation, start):
             # the joint iteration's late corrections: one load step, Newton from the last state
             self.solver.options = replace(options, initial_step=1.0)
         try:
