@@ -36,6 +36,8 @@ def test_default_model_loads_with_five_muscles():
         ("limits_deg = [0.0, 160.0]", "limits_deg = [160.0, 0.0]", "lower < upper"),
         ("[joint]", "[joint]\nstiffness = 3", "stiffness"),  # unknown keys are refused
         ("name = \"persival-upper-limb\"", "name = [", "not valid TOML"),
+        ("insertion = [0.0, -18.0, 16.0]", "insertion = [0.0, -10.0, 10.0]", "inside its wrap cylinder"),
+        ('name = "biceps"', 'name = "biceps"\nwrap_cable = 10.0', "wrap_cable needs a wrap_radius"),
     ],
 )
 def test_bad_model_files_are_refused(tmp_path, old, new, message):
@@ -51,17 +53,23 @@ def test_missing_file_and_unknown_profile(tmp_path):
         model.profile("huge")
 
 
-def test_moment_arms_at_90_degrees_are_anatomical():
-    """Straight-line moment arms of the default geometry within SPEC 3.3's ranges."""
+def test_path_moment_arms_are_in_the_spec_bands():
+    """Moment arms of the default paths (straight or wrapped) in SPEC 3.3's bands (Murray et al. 1995)."""
     arm = ArmModel.__new__(ArmModel)  # geometry only: no meshing
     arm.spec, _ = load_model_file()
     arm.axis, arm.centre = np.array([1.0, 0.0, 0.0]), np.zeros(3)
-    expected = {"biceps": (35, 45), "brachialis": (20, 25), "brachioradialis": (50, 70), "triceps": (-22, -18),
-                "anconeus": (-12, -8)}
+    bands = {  # muscle: (angles, lowest, highest)
+        "biceps": [((90.0,), 35, 45), ((140.0,), 25, None)],
+        "brachialis": [((90.0,), 18, 30), ((140.0,), 18, None)],
+        "brachioradialis": [((90.0, 105.0, 120.0), 45, 70)],
+        "triceps": [(np.arange(0.0, 161.0, 5.0), -25, -15)],  # wrapped over the trochlea beyond 40 deg
+        "anconeus": [(np.arange(0.0, 161.0, 5.0), -12, -5)],
+    }
     for muscle in arm.spec.ordered_muscles():
-        r = arm.line_moment_arm(muscle, 90.0)
-        lo, hi = expected[muscle.name]
-        assert lo <= r <= hi, (muscle.name, r)
+        for angles, lo, hi in bands[muscle.name]:
+            for theta in angles:
+                r = arm.line_moment_arm(muscle, theta)
+                assert lo <= r and (hi is None or r <= hi), (muscle.name, theta, r)
     # the biceps' origin-insertion length shrinks by about a quarter from 0 to 150 deg
     biceps = arm.spec.muscle("biceps")
     length = [np.linalg.norm(np.array(biceps.origin) - arm.forearm_point(biceps.insertion, t)) for t in (0.0, 150.0)]

@@ -94,7 +94,7 @@ class ArmModel(ArmBody):
                                  mf.fibre_prestretch[cells], mf.parameters)
         path = MusclePath(
             origin=np.asarray(muscle.origin, dtype=float),
-            insertion=lambda theta, m=muscle: self.forearm_point(m.insertion, theta),
+            insertion=lambda theta, m=muscle: self.body_end(m, theta),
             geometry=lambda theta, m=muscle: self.muscle_length(m, theta),
             mesh_angle_deg=muscle.mesh_angle_deg,
             bones=self._bones_of(muscle) if muscle.wraps else None,
@@ -349,20 +349,26 @@ class ArmModel(ArmBody):
         :class:`Hinge`), the whole mesh assembled at once. Returns the largest nodal force
         residual of the free DOFs (N) and the hinge's moment residual from virtual work,
         f . dx/dtheta - M_ext (N mm)."""
-        nodes, reference, O, I, is_insertion = [], [], [], [], []
-        for m in self.spec.ordered_muscles():
-            insertion_ref = self.forearm_point(m.insertion, m.mesh_angle_deg)
+        nodes, reference, O, I, is_insertion, counts = [], [], [], [], [], []
+        muscles = self.spec.ordered_muscles()
+        for m in muscles:
+            insertion_ref = self.body_end(m, m.mesh_angle_deg)
             for end in ("origin", "insertion"):
                 ids = self.mesh.node_sets[f"{m.name}/{end}"]
                 nodes.append(ids)
+                counts.append(len(ids))
                 reference.append(np.full(len(ids), m.mesh_angle_deg))
                 O.append(np.tile(m.origin, (len(ids), 1)))
                 I.append(np.tile(insertion_ref, (len(ids), 1)))
                 is_insertion.append(np.full(len(ids), end == "insertion"))
+        # the body ends (a wrapped path's end slides along its first segment, SPEC 3.3)
+        repeats = np.array(counts)
+        line_ends = lambda theta: np.repeat(np.repeat([self.body_end(m, theta) for m in muscles], 2, axis=0),  # noqa: E731
+                                            repeats, axis=0)
         elbow = Hinge(
             "elbow", np.concatenate(nodes), self.centre, self.axis, np.concatenate(reference), start_deg=state.elbow_angle_deg,
             free=True, external_moment=self.external_moment,
-            muscle_lines=(np.vstack(O), np.vstack(I), np.concatenate(is_insertion)),
+            muscle_lines=(np.vstack(O), np.vstack(I), np.concatenate(is_insertion)), line_ends=line_ends,
         )
         solver = QuasiStaticSolver(self.mesh, self.material, [elbow], self.options)
         activation = self.cell_activation(state.activations)

@@ -19,6 +19,7 @@ from persival.model.geometry import swept_solid_mesh
 from persival.model.mesh import Tet10Mesh
 from persival.model.rotations import rotation_about
 from persival.model.state_cache import cached_mesh
+from persival.model.wrapping import WrapCylinder
 
 __all__ = ["ArmBody", "muscle_profile", "rotation_about"]
 
@@ -69,7 +70,7 @@ class ArmBody:
 
     def centre_line(self, muscle: Muscle, stations: int = 33) -> np.ndarray:
         """Stations along origin -> via points -> insertion in the muscle's mesh pose."""
-        knots = np.array([muscle.origin, *muscle.via, self.forearm_point(muscle.insertion, muscle.mesh_angle_deg)])
+        knots = np.array([muscle.origin, *muscle.via, self.body_end(muscle, muscle.mesh_angle_deg)])
         seg = np.linalg.norm(np.diff(knots, axis=0), axis=1)
         if np.any(seg <= 0):
             raise ValueError(f"muscle {muscle.name!r}: consecutive centre-line points coincide")
@@ -165,20 +166,35 @@ class ArmBody:
         dM += j.limit_moment * (-np.exp((lo - theta) / w) - np.exp((theta - hi) / w)) / w * (180.0 / np.pi)
         return float(M), float(dM)
 
-    def muscle_length(self, muscle: Muscle, theta_deg: float) -> tuple[float, float, float]:
-        """Origin-insertion length L (mm) and its derivatives dL/dtheta, d2L/dtheta2 (per radian).
+    def wrap_cylinder(self, muscle: Muscle) -> WrapCylinder:
+        """The cylinder on the hinge axis the muscle's path wraps (radius 0: a straight path)."""
+        return WrapCylinder(self.centre, self.axis, muscle.wrap_radius, 1 if muscle.action == "extensor" else -1)
 
-        The insertion turns about the hinge: I' = k x (I - c), I'' = k x I'.
+    def muscle_length(self, muscle: Muscle, theta_deg: float) -> tuple[float, float, float]:
+        """The muscle's length L (mm) and its derivatives dL/dtheta, d2L/dtheta2 (per radian).
+
+        L is the origin-insertion path's length less the wrapped path's cable (``wrap_cable``):
+        the length of the FE body between its end faces. The insertion turns about the hinge:
+        I' = k x (I - c), I'' = k x I'. A wrapped path (SPEC 3.3, :mod:`persival.model.wrapping`)
+        gains r per radian while it wraps.
         """
-        origin = np.asarray(muscle.origin, dtype=float)
         insertion = self.forearm_point(muscle.insertion, theta_deg)
         v1 = np.cross(self.axis, insertion - self.centre)
         v2 = np.cross(self.axis, v1)
-        chord = insertion - origin
-        L = float(np.linalg.norm(chord))
-        e = chord / L
-        dL = float(e @ v1)
-        return L, dL, float((v1 @ v1 - dL**2) / L + e @ v2)
+        L, dL, d2L = self.wrap_cylinder(muscle).geometry(np.asarray(muscle.origin, dtype=float), insertion, v1, v2)
+        if L <= muscle.wrap_cable:
+            raise ValueError(f"muscle {muscle.name!r}: wrap_cable {muscle.wrap_cable} mm is longer than its path "
+                             f"({L:.1f} mm at {theta_deg} deg)")
+        return L - muscle.wrap_cable, dL, d2L
+
+    def body_end(self, muscle: Muscle, theta_deg: float) -> np.ndarray:
+        """Where the muscle's FE body ends at theta: its insertion, or for a wrapped path the point
+        ``L(theta) - wrap_cable`` along the path's first segment (the rest is cable)."""
+        insertion = self.forearm_point(muscle.insertion, theta_deg)
+        if muscle.wrap_radius == 0:
+            return insertion
+        origin = np.asarray(muscle.origin, dtype=float)
+        return origin + self.muscle_length(muscle, theta_deg)[0] * self.wrap_cylinder(muscle).first_direction(origin, insertion)
 
     def cell_activation(self, activations: np.ndarray) -> np.ndarray:
         return np.asarray(activations, dtype=float)[self.mesh.cell_data["muscle"]]

@@ -82,6 +82,9 @@ class Muscle(_Strict):
     insertion: Vector
     wraps: list[str] = Field(default_factory=list, description="bones the muscle slides over (frictionless contact)")
     via: list[Vector] = Field(default_factory=list, description="centre-line points, upper-arm frame")
+    wrap_radius: float = Field(0.0, ge=0, description="mm: the path wraps a cylinder of this radius on the hinge axis "
+                                                      "(0: a straight path; persival.model.wrapping)")
+    wrap_cable: float = Field(0.0, ge=0, description="mm of the wrapped path that is inextensible cable, not FE body")
     mesh_angle_deg: float = Field(description="elbow angle of the stress-free mesh pose")
     bow: float = Field(0.0, ge=0, description="mm: sagitta of a sine bow of the centre line away from the hinge")
     belly_radius: float = Field(gt=0)
@@ -97,6 +100,14 @@ class Muscle(_Strict):
         if min(v) <= 0:
             raise ValueError(f"{info.field_name} must be positive, got {v}")
         return v
+
+    @model_validator(mode="after")
+    def _wrap_is_complete(self):
+        if self.wrap_radius > 0 and self.via:
+            raise ValueError(f"muscle {self.name!r}: a wrapped path (wrap_radius) takes no via points")
+        if self.wrap_cable > 0 and self.wrap_radius == 0:
+            raise ValueError(f"muscle {self.name!r}: wrap_cable needs a wrap_radius")
+        return self
 
     @model_validator(mode="after")
     def _belly_thicker_than_tendons(self):
@@ -156,6 +167,14 @@ class ArmModelFile(_Strict):
                         f"muscle {m.name!r}: origin {m.origin} lies inside bone {bone.name!r} "
                         f"({d:.1f} mm from its axis, radius {bone.radius} mm)"
                     )
+        centre, axis = np.array(self.joint.centre), np.array(self.joint.axis) / np.linalg.norm(self.joint.axis)
+        for m in (m for m in self.muscles if m.wrap_radius > 0):
+            for end in ("origin", "insertion"):
+                q = np.array(getattr(m, end)) - centre
+                d = float(np.linalg.norm(q - (q @ axis) * axis))
+                if d <= m.wrap_radius:
+                    raise ValueError(f"muscle {m.name!r}: its {end} lies {d:.1f} mm from the hinge axis, inside its "
+                                     f"wrap cylinder (wrap_radius {m.wrap_radius} mm)")
         bone_names = [b.name for b in self.bones]
         for m in self.muscles:
             unknown = [b for b in m.wraps if b not in bone_names]

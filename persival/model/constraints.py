@@ -80,10 +80,15 @@ class Hinge:
     free: bool = False
     external_moment: Callable[[float], tuple[float, float]] | None = None
     muscle_lines: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    # theta_deg -> (n, 3) per node (given order): the lines' end points when they do not turn
+    # rigidly with the body (a wrapped path, persival.model.wrapping); I of muscle_lines at each
+    # node's reference angle
+    line_ends: Callable[[float], np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         nodes = np.asarray(self.nodes, dtype=np.int64)
         order = np.argsort(nodes)
+        self._order = order
         per_node = lambda v: np.broadcast_to(np.asarray(v, dtype=float), nodes.shape)[order].copy()  # noqa: E731
         if self.end_deg is None:
             self.end_deg = self.start_deg
@@ -131,7 +136,10 @@ class Hinge:
         if self.muscle_lines is None:
             return self._rotate(X - self.centre, theta_deg)
         O, I_ref, is_insertion = self.muscle_lines
-        I = self._rotate(I_ref - self.centre, theta_deg)
+        if self.line_ends is None:
+            I = self._rotate(I_ref - self.centre, theta_deg)
+        else:
+            I = np.asarray(self.line_ends(float(theta_deg)), dtype=float)[self._order]
         d_ref = (I_ref - O) / np.linalg.norm(I_ref - O, axis=1)[:, None]
         d = (I - O) / np.linalg.norm(I - O, axis=1)[:, None]
         v = np.cross(d_ref, d)

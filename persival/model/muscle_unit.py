@@ -31,7 +31,6 @@ from __future__ import annotations
 import bisect
 from collections.abc import Callable
 from dataclasses import replace
-from itertools import pairwise
 
 import numpy as np
 
@@ -146,16 +145,32 @@ class MuscleUnit:
             full = self.material
             self._set_path(self.mesh_angle_deg, self.mesh_angle_deg)
             try:
-                for before, share in pairwise((0.0, 0.6, 0.8, 0.9, 0.95, 0.98, 1.0)):
-                    self.solver.material = replace(full, fibre_prestretch=1.0 + share * (full.fibre_prestretch - 1.0))
-                    step = None if progress is None else (lambda t, a=before, b=share: progress(a + t * (b - a)))
-                    u = self.solver.solve(0.0, initial_displacement=u, progress=step).displacement
-            except ConvergenceError as exc:
-                raise ConvergenceError(f"muscle {self.name!r}: the prestressed mesh pose has no equilibrium: {exc}") from exc
+                u = self._switch_on_prestretch(u, progress)
             finally:
                 self.solver.material = full
             self._rest = self.response(self.mesh_angle_deg, 0.0, u)
         return self._rest
+
+    def _switch_on_prestretch(self, u: np.ndarray, progress=None) -> np.ndarray:
+        """Continuation of the fibre prestretch 1 -> lambda_0 at the mesh pose through the shares
+        0.6, 0.8, 0.9, 0.95, 0.98, 1 of it; a step where Newton fails is bisected (down to 1/64;
+        lambda_0 = 1.3 needs it on the coarse biceps)."""
+        full = self.material
+        before, targets = 0.0, [0.6, 0.8, 0.9, 0.95, 0.98, 1.0]
+        while targets:
+            share = targets[0]
+            self.solver.material = replace(full, fibre_prestretch=1.0 + share * (full.fibre_prestretch - 1.0))
+            report = None if progress is None else (lambda t, a=before, b=share: progress(a + t * (b - a)))
+            try:
+                u = self.solver.solve(0.0, initial_displacement=u, progress=report).displacement
+            except ConvergenceError as exc:
+                if share - before < 1.0 / 64.0:
+                    raise ConvergenceError(f"muscle {self.name!r}: the prestressed mesh pose has no equilibrium "
+                                           f"beyond {before:.3f} of its prestretch: {exc}") from exc
+                targets.insert(0, 0.5 * (before + share))
+                continue
+            before = targets.pop(0)
+        return u
 
     def solve(self, theta_deg: float, activation: float, start: MuscleState | None = None, progress=None,
               fresh_slope: bool = True) -> MuscleState:
