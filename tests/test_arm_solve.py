@@ -157,7 +157,7 @@ def test_moment_curves_predict_the_hanging_arm(arm, states):
     angles = np.array([np.floor(theta), np.floor(theta) + 1.0, 60.0])
     curves = muscle_curves(arm, angles)
     assert predicted_equilibrium(curves, (0, 0, 0, 0, 0)) == pytest.approx(theta, abs=0.05)
-    assert abs(curves["biceps"]["passive_tension_N"][2]) < 2.0  # biceps meshed at 60 deg
+    assert abs(curves["biceps"]["passive_tension_N"][2]) < 3.0  # biceps meshed at 60 deg (lambda_0 1.3: 2.2 N)
     assert np.all(curves["biceps"]["active_moment_Nmm"] > 5 * curves["biceps"]["passive_moment_Nmm"])
 
 
