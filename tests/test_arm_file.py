@@ -32,7 +32,7 @@ def test_default_model_loads_with_five_muscles():
         ("belly_radius = 20.0", "belly_radius = -20.0", "belly_radius"),
         ("origin = [0.0, 16.0, 330.0]", "origin = [0.0, 2.0, 150.0]", "inside bone 'humerus'"),
         ("tendon_radius = [4.0, 5.0]", "tendon_radius = [4.0, -5.0]", "tendon_radius must be positive"),
-        ("mesh_angle_deg = 90.0", "mesh_angle_deg = 170.0", "outside the joint limits"),
+        ("mesh_angle_deg = 140.0", "mesh_angle_deg = 170.0", "outside the joint limits"),
         ("limits_deg = [0.0, 160.0]", "limits_deg = [160.0, 0.0]", "lower < upper"),
         ("[joint]", "[joint]\nstiffness = 3", "stiffness"),  # unknown keys are refused
         ("name = \"persival-upper-limb\"", "name = [", "not valid TOML"),
