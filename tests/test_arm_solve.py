@@ -192,7 +192,7 @@ def test_a_stalled_activation_jump_detours_through_the_taut_mesh_pose(arm, monke
     # the angle where the brachialis is 15 mm shorter than in its mesh pose
     slack = brentq(lambda t: unit.length(t) - (unit.mesh_length - 15.0), unit.mesh_angle_deg, 160.0)
     start = unit._continue(slack, 0.0, unit.rest_state(), detour=False)  # passive and shortened: bowed
-    taut = unit._continue(unit.mesh_length, 1.0, unit.rest_state(), detour=False)
+    taut = unit._continue(unit.mesh_angle_deg, 1.0, unit.rest_state(), detour=False)  # activated in its mesh pose
     reference = unit._continue(slack, 1.0, taut, detour=False)
     assert reference.tension > 0.0 > start.tension - 1.0  # activated it pulls; slack it barely pushes
 
@@ -208,7 +208,9 @@ def test_a_stalled_activation_jump_detours_through_the_taut_mesh_pose(arm, monke
     monkeypatch.setattr(unit.solver, "solve", stall_first)
     state = unit._continue(slack, 1.0, start)
     assert len(calls) == 3  # the stalled jump, then activate at the mesh pose, then shorten
-    np.testing.assert_allclose(state.displacement, reference.displacement, rtol=0, atol=1e-9)
+    # two Newton solutions from different starts agree to the solver's force tolerance (1e-6 N):
+    # 9.2e-8 mm with the session VI brachialis (lambda_0 1.30)
+    np.testing.assert_allclose(state.displacement, reference.displacement, rtol=0, atol=1e-6)
 
     def always_stall(*args, **kwargs):
         raise ConvergenceError("line search failed to reduce the residual")
