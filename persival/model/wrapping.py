@@ -51,10 +51,6 @@ class WrapCylinder:
         x, y = float(q @ e1), float(q @ e2)
         return float(np.hypot(x, y)), float(np.arctan2(y, x)), float(q @ self.axis)
 
-    def clearance(self, p: np.ndarray) -> float:
-        """Distance (mm) of point p outside the cylinder; negative inside (a path can not start there)."""
-        return self._polar(p)[0] - self.radius
-
     def _wrap(self, origin: np.ndarray, insertion: np.ndarray):
         """The wrapped path's planar parts: (tangent lengths t_o, t_i, arc angle, polar angle of
         the origin-side tangent point, axial offset), or None when the straight segment clears."""
