@@ -37,7 +37,8 @@ def test_default_model_loads_with_five_muscles():
         ("[joint]", "[joint]\nstiffness = 3", "stiffness"),  # unknown keys are refused
         ("name = \"persival-upper-limb\"", "name = [", "not valid TOML"),
         ("insertion = [0.0, -18.0, 16.0]", "insertion = [0.0, -10.0, 10.0]", "inside its wrap cylinder"),
-        ('name = "biceps"', 'name = "biceps"\nwrap_cable = 10.0', "wrap_cable needs a wrap_radius"),
+        ('insertion = [2.0, -2.0, -45.0]\nwrap_radius = 7.0', 'insertion = [2.0, -2.0, -45.0]\nwrap_cable = 10.0',
+         "wrap_cable needs a wrap_radius"),
     ],
 )
 def test_bad_model_files_are_refused(tmp_path, old, new, message):
@@ -70,6 +71,12 @@ def test_path_moment_arms_are_in_the_spec_bands():
             for theta in angles:
                 r = arm.line_moment_arm(muscle, theta)
                 assert lo <= r and (hi is None or r <= hi), (muscle.name, theta, r)
+    # no muscle changes sides from 10 deg of hyperextension to the flexion limit: a flexor behind
+    # the hinge near 0 deg made some activations bistable (a second stable root near -8 deg)
+    for muscle in arm.spec.ordered_muscles():
+        sign = 1.0 if muscle.action == "flexor" else -1.0
+        arms = np.array([arm.line_moment_arm(muscle, t) for t in np.arange(-10.0, 161.0, 5.0)])
+        assert (sign * arms > 4.0).all(), (muscle.name, arms.min(), arms.max())
     # the biceps' origin-insertion length shrinks by about a quarter from 0 to 150 deg
     biceps = arm.spec.muscle("biceps")
     length = [np.linalg.norm(np.array(biceps.origin) - arm.forearm_point(biceps.insertion, t)) for t in (0.0, 150.0)]

@@ -9,6 +9,7 @@ real table computed here.
 
 from __future__ import annotations
 
+import copy
 import json
 import shutil
 from pathlib import Path
@@ -21,6 +22,7 @@ from persival.campaign.response_table import ResponseTable, build_response_table
 from persival.campaign.table_solve import OutsideTableError, TableSolver
 from persival.model.arm import ArmModel
 from persival.model.state_cache import mesh_fingerprint
+from persival.vocabulary import MUSCLES
 
 FIXTURE = Path(__file__).parent / "data" / "response_table_coarse"
 
@@ -77,10 +79,17 @@ def test_equilibrium_angle_solves_the_tabulated_moment_balance(solver):
         assert solver.residual(theta - 0.5, alpha)[0] > 0 > solver.residual(theta + 0.5, alpha)[0]
     assert solver.equilibrium_angle([1, 1, 1, 0, 0]) > solver.equilibrium_angle([0, 0, 0, 0, 0]) \
         > solver.equilibrium_angle([0, 0, 0, 0.3, 0.3])
-    # full extensors turn the forearm past full extension (the joint limit's stiffening holds it
-    # just below 0 deg): outside the table, a clear error (the campaign simulator then solves directly)
-    with pytest.raises(OutsideTableError, match="lies below the tabulated angles 0 to 160 deg"):
-        solver.equilibrium_angle([0, 0, 0, 1, 1])
+    # full extensors hold the forearm just above full extension (the flexors pass in front of the
+    # trochlea there, the joint limit stiffens below 0 deg)
+    assert 0.0 < solver.equilibrium_angle([0, 0, 0, 1, 1]) < 10.0
+    # a balance outside the tabulated angles is a clear error (the campaign simulator then solves
+    # directly): the hanging arm on the table cut to 40-160 deg
+    cut = copy.copy(solver)
+    cut._fine = solver._fine[solver._fine >= 40.0]
+    cut.lo_deg = 40.0
+    cut._level_moments = {m: solver.moments.level_moments(m, cut._fine) for m in MUSCLES}
+    with pytest.raises(OutsideTableError, match="lies below the tabulated angles 40 to 160 deg"):
+        cut.equilibrium_angle([0, 0, 0, 0, 0])
 
 
 def test_bad_activations_are_refused_before_any_work(solver):

@@ -135,16 +135,19 @@ class TableSolver:
             state = unit.solve_from_guess(theta_deg, activation, guess.displacement)
             if state is not None:
                 return state, "guess"
-        levels = self._off_level_sides(activation)
+        newton_order, continuation_order = self._off_level_orders(activation)
         on_level = {}
-        for level in levels:  # Newton at a from a bracketing level's state
+        for level in newton_order:  # Newton at a from a bracketing level's state
             start = self.guess(muscle, theta_deg, level)
             if start is not None:
                 on_level[level] = start
                 state = unit.solve_from_guess(theta_deg, activation, start.displacement, max_iterations=20)
                 if state is not None:
                     return state, f"level {level:g}"
-        for level, start in on_level.items():  # that level's equilibrium, then a alone moves
+        for level in continuation_order:  # that level's equilibrium, then a alone moves
+            start = on_level.get(level)
+            if start is None:
+                continue
             solved = unit.solve_from_guess(theta_deg, level, start.displacement)
             if solved is not None:
                 try:
@@ -154,16 +157,22 @@ class TableSolver:
         return unit.solve(theta_deg, activation, self.nearest(muscle, theta_deg, activation)), \
             "continuation"
 
-    def _off_level_sides(self, activation: float) -> list[float]:
-        """The two table levels around an off-level activation, the better start first: the nearer
-        one, unless it is the passive level 0, where a muscle can hang slack and bowed (its
-        activation snaps the bow straight: measured 125 to 147 Newton iterations by continuation
-        from a = 0 to 0.06 to 0.08 for the biceps at 65 deg, 31 to 68 from a = 0.25)."""
+    def _off_level_orders(self, activation: float) -> tuple[list[float], list[float]]:
+        """The two table levels around an off-level activation (none on a level), the better start
+        first, for Newton at a from a level's state and for continuing a level's equilibrium in a
+        alone. Newton: the nearer level, unless it is the passive level 0, where a muscle can hang
+        slack and bowed (Newton from there fails). Continuation: the nearer level, level 0 only
+        within the lowest quarter of its interval (a slack, bowed muscle activated from 0 to a few
+        per cent straightens in 10 to 65 Newton iterations where coming down from 0.25 takes 250 to
+        340; from 0.08 up 0.25 is the cheaper side, 31 to 163 against 159 to 296: quick mesh, seven
+        held-out states of the session-VI main job)."""
         j, v = _bracket(self.table.levels, activation)
         if v in (0.0, 1.0):
-            return []
+            return [], []
         lo, hi = float(self.table.levels[j]), float(self.table.levels[j + 1])
-        return [hi, lo] if v > 0.5 or lo == 0.0 else [lo, hi]
+        newton = [hi, lo] if v > 0.5 or lo == 0.0 else [lo, hi]
+        continuation = [lo, hi] if v < (0.25 if lo == 0.0 else 0.5) else [hi, lo]
+        return newton, continuation
 
     def length(self, muscle: str, theta_deg: float) -> float:
         """Origin-insertion length (mm) of the muscle at theta."""
