@@ -87,6 +87,10 @@ class WrapCylinder:
         L = float(np.hypot(planar, h))
         return L, planar * rate / L, rate**2 * h**2 / L**3
 
+    def wraps(self, origin: np.ndarray, insertion: np.ndarray) -> bool:
+        """Whether the path from ``origin`` to ``insertion`` touches the cylinder."""
+        return self._wrap(origin, insertion) is not None
+
     def first_direction(self, origin: np.ndarray, insertion: np.ndarray) -> np.ndarray:
         """Unit direction of the path's first segment at O (towards the tangent point when wrapped)."""
         wrapped = self._wrap(origin, insertion)
