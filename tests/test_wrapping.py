@@ -69,3 +69,23 @@ def test_the_first_segment_is_tangent_to_the_cylinder():
 def test_an_end_inside_the_cylinder_is_refused():
     with pytest.raises(ValueError, match="inside its wrap cylinder"):
         WrapCylinder(CENTRE, AXIS, 30.0, turn=1).geometry(ORIGIN, INSERTION, np.zeros(3), np.zeros(3))
+
+
+def test_an_unwrapped_body_ends_exactly_at_the_insertion():
+    """Bit for bit: the mesh pose's centre line feeds gmsh, whose loft meshes a line that differs
+    in the 14th digit differently (the brachioradialis: 1754 instead of 2548 nodes)."""
+    from persival.model.arm import ArmModel
+    from persival.model.arm_file import load_model_file
+
+    arm = ArmModel.__new__(ArmModel)  # geometry only: no meshing
+    arm.spec, _ = load_model_file()
+    arm.axis, arm.centre = np.array([1.0, 0.0, 0.0]), np.zeros(3)
+    for name, theta in (("biceps", 60.0), ("brachialis", 60.0), ("brachioradialis", 60.0), ("triceps", 20.0)):
+        muscle = arm.spec.muscle(name)
+        assert muscle.wrap_radius > 0
+        assert np.array_equal(arm.body_end(muscle, theta), arm.forearm_point(muscle.insertion, theta)), name
+    # wrapped: the end lies on the first segment, L(theta) from the origin
+    biceps = arm.spec.muscle("biceps")
+    end = arm.body_end(biceps, 0.0)
+    assert np.linalg.norm(end - np.array(biceps.origin)) == pytest.approx(arm.muscle_length(biceps, 0.0)[0])
+    assert not np.allclose(end, arm.forearm_point(biceps.insertion, 0.0), atol=1.0)
