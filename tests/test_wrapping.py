@@ -80,7 +80,7 @@ def test_an_unwrapped_body_ends_exactly_at_the_insertion():
     arm = ArmModel.__new__(ArmModel)  # geometry only: no meshing
     arm.spec, _ = load_model_file()
     arm.axis, arm.centre = np.array([1.0, 0.0, 0.0]), np.zeros(3)
-    for name, theta in (("biceps", 60.0), ("brachialis", 60.0), ("brachioradialis", 60.0), ("triceps", 20.0)):
+    for name, theta in (("biceps", 60.0), ("brachialis", 60.0), ("triceps", 20.0), ("anconeus", 60.0)):
         muscle = arm.spec.muscle(name)
         assert muscle.wrap_radius > 0
         assert np.array_equal(arm.body_end(muscle, theta), arm.forearm_point(muscle.insertion, theta)), name
