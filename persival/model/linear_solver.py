@@ -74,9 +74,19 @@ class SparseSymmetricSolver:
             # pypardiso looks for MKL with a recursive glob over sys.prefix on every solver it
             # makes (0.8 s each, five per arm, profiled); the library it found is named once
             os.environ.setdefault("PYPARDISO_MKL_RT", self._pardiso.libmkl._name)
-            # iparm(11)/(13) (1-based): scaling and weighted matching help indefinite systems
-            self._pardiso.set_iparm(11, 1)
-            self._pardiso.set_iparm(13, 1)
+            # PARDISO reads iparm only when iparm[0] = 1; with pypardiso's 0 it fills in its own
+            # defaults, which (measured with MKL 2025 on the quick biceps, 13632 DOF) refine every
+            # solution twice even when no pivot was perturbed: a solve cost 60 ms beside a 115 ms
+            # factorization, 8 ms without the refinement at the same relative residual (1e-10).
+            # Set: the documented defaults of mtype -2, with refinement only where pivots were
+            # perturbed (iparm[7] = 0); callers that need more refine themselves (_refined_solve).
+            iparm = self._pardiso.iparm
+            iparm[:] = 0
+            iparm[0] = 1   # use these values
+            iparm[1] = 2   # METIS nested-dissection ordering
+            iparm[7] = 0   # iterative refinement: two steps only after perturbed pivots
+            iparm[9] = 8   # pivot perturbation 1e-8 (symmetric indefinite)
+            iparm[20] = 1  # Bunch-Kaufman 1x1 and 2x2 pivoting
 
     def factorize(self, upper: sp.csr_matrix) -> None:
         """Numerically factorize; the symbolic analysis is redone only when the pattern changes."""
