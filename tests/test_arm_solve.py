@@ -35,7 +35,7 @@ def states(arm):
 def test_hanging_arm_is_near_extension_and_balanced(arm, states):
     hanging = states[0]
     assert 0.0 < hanging.elbow_angle_deg < 40.0
-    assert abs(hanging.moment_residual) <= arm.options.moment_atol
+    assert abs(hanging.moment_residual) <= arm.moment_tolerance(hanging.muscle_states)
     # moments add up: muscles + gravity + passive joint
     assert sum(hanging.muscle_moments.values()) + hanging.external_moment == pytest.approx(0.0, abs=1e-3)
 

@@ -9,6 +9,7 @@ check the build, its kill-and-resume and its agreement with the fixture.
 from __future__ import annotations
 
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -63,7 +64,7 @@ def test_foreign_tables_are_refused(table, tmp_path):
     np.savez(tmp_path / "other.npz", x=np.zeros(3))
     with pytest.raises(TableMismatchError, match="not a moment table"):
         MomentTable.load(tmp_path / "other.npz")
-    unfinished = MomentTable(**{**table.__dict__, "done": np.zeros_like(table.done)})
+    unfinished = replace(table, done=np.zeros_like(table.done))
     unfinished.save(tmp_path / "unfinished.npz")
     with pytest.raises(TableMismatchError, match="unfinished: 0 of 15 columns"):
         MomentTable.load(tmp_path / "unfinished.npz", complete=True)

@@ -141,6 +141,9 @@ class MomentTable:
     fine_gravity: np.ndarray  # (n_fine,) N mm, forearm + hand (ArmModel.gravity_moment)
     fine_joint: np.ndarray  # (n_fine,) N mm (ArmModel.passive_joint_moment)
     meta: dict = field(default_factory=dict)  # model_hash, profile, forearm, build times
+    # (muscle, level) -> (M, dM, spline): a column's spline is rebuilt only when its values change
+    # (builds fill the arrays in place; a root search calls level_moments some 40 times per state)
+    _splines: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     # ------------------------------------------------------------------ derived arrays
     @property
@@ -177,7 +180,11 @@ class MomentTable:
             ok = np.isfinite(M) & np.isfinite(dM)
             if ok.sum() < 2:
                 continue
-            spline = CubicHermiteSpline(rad[ok], M[ok], dM[ok])
+            kept = self._splines.get((m, j))
+            if kept is None or not (np.array_equal(kept[0], M, equal_nan=True) and np.array_equal(kept[1], dM, equal_nan=True)):
+                kept = (M.copy(), dM.copy(), CubicHermiteSpline(rad[ok], M[ok], dM[ok]))
+                self._splines[(m, j)] = kept
+            spline = kept[2]
             inside = (theta >= self.angles_deg[ok][0] - 1e-9) & (theta <= self.angles_deg[ok][-1] + 1e-9)
             out[inside, j] = spline(np.radians(theta[inside]))
         return out

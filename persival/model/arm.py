@@ -272,6 +272,13 @@ class ArmModel(ArmBody):
         M, dM = self.external_moment(np.radians(theta_deg))
         return g - M, dg - dM, states
 
+    def moment_tolerance(self, states: dict[str, MuscleState]) -> float:
+        """The joint's moment tolerance (N mm) at these muscle states: options.moment_atol, or
+        options.moment_rtol of the muscles' summed |moments| where that is larger (their noise
+        floor: a state of 3e4 N mm of summed moments stalled at 2.3e-4 N mm against 1e-4)."""
+        summed = sum(abs(s.moment) for s in states.values())
+        return max(self.options.moment_atol, self.options.moment_rtol * summed)
+
     def _equilibrium(self, target, start: dict[str, MuscleState], angle: float, tracker: SolveTracker) -> ArmState:
         """Solve g(theta) = 0 by a safeguarded Newton iteration on theta (SPEC 3.3: an
         equivalent of the bordered system). Its derivative is the Schur complement of every
@@ -287,7 +294,7 @@ class ArmModel(ArmBody):
         lo, hi = -np.inf, np.inf  # bracket: g(lo) < 0 < g(hi) (g grows with theta when stable)
         lower, upper = self.spec.joint.limits_deg
         for _ in range(60):
-            if abs(g) <= opts.moment_atol:
+            if abs(g) <= self.moment_tolerance(states):
                 break
             if g > 0:
                 hi = min(hi, theta)
@@ -318,6 +325,7 @@ class ArmModel(ArmBody):
         stats["max_penetration_mm"] = max(s.max_penetration for s in states.values())
         stats["contact_force_N"] = {name: s.contact_force for name, s in states.items() if s.contact_force}
         stats["joint_stiffness_Nmm_per_rad"] = float(dg)
+        stats["moment_tolerance_Nmm"] = self.moment_tolerance(states)
         return ArmState(
             activations=np.asarray(target, dtype=float).copy(),
             elbow_angle_deg=theta,

@@ -199,7 +199,7 @@ class MuscleUnit:
             chart, ds = self.chart(start.angle_deg)
             guess = start.displacement + (chart(theta_deg) - chart(start.angle_deg)) / ds * start.sensitivity
             state = self.solve_from_guess(theta_deg, activation, guess, progress, max_iterations=6,
-                                          slope_from=None if fresh_slope else start)
+                                          slope_from=None if fresh_slope else start, reuse_factorization=True)
         else:
             state = None if near else self._from_library(theta_deg, activation, progress)
         if state is None:
@@ -234,11 +234,14 @@ class MuscleUnit:
         return self.solve_from_guess(theta_deg, activation, (1.0 - w) * lo.displacement + w * hi.displacement, progress)
 
     def solve_from_guess(self, theta_deg: float, activation: float, guess: np.ndarray, progress=None,
-                         max_iterations: int = 12, slope_from: MuscleState | None = None) -> MuscleState | None:
+                         max_iterations: int = 12, slope_from: MuscleState | None = None,
+                         reuse_factorization: bool = False) -> MuscleState | None:
         """Plain Newton at (theta, activation) from a guessed displacement (no load stepping);
         None if it does not converge within ``max_iterations``. The guess's insertion face is
         put where theta puts it, so an interpolation of neighbouring states is a good guess.
         ``slope_from``: take the moment slope and du/dtheta from this nearby state (see :meth:`solve`).
+        ``reuse_factorization``: Newton directions from this muscle's last factorization where it
+        is of a nearby tangent (SolverOptions.reuse_factorization; the joint iteration's corrections).
         """
         self._set_path(theta_deg, theta_deg)
         # the faces exactly where theta puts them: an extrapolation in theta misses the insertion's
@@ -248,7 +251,8 @@ class MuscleUnit:
         guess[self._insertion_face.nodes] = self._insertion_face.end
         options = self.solver.options
         self.solver.options = replace(options, initial_step=1.0, min_step=1.0,
-                                      max_iterations=min(options.max_iterations, max_iterations))
+                                      max_iterations=min(options.max_iterations, max_iterations),
+                                      reuse_factorization=reuse_factorization or options.reuse_factorization)
         try:
             solution = self.solver.solve(activation, initial_displacement=guess, initial_activation=activation,
                                          progress=progress)

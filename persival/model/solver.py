@@ -37,9 +37,17 @@ class SolverOptions:
     min_step: float = 1.0 / 256.0
     max_line_search: int = 6
     moment_atol: float = 1e-4  # N mm, hinge moment residual at convergence (free hinge)
+    # ... or this share of the muscles' summed |moments|, where larger (ArmModel's joint
+    # iteration): each muscle's moment is exact only to its own Newton tolerance (rtol of its
+    # forces), and summed moments of 1e4 to 1e5 N mm put that noise floor near 1e-4 N mm
+    moment_rtol: float = 1e-7
     max_angle_step: float = 5.0  # deg, largest hinge-angle change of one Newton iteration
     joint_max_step: float = 15.0  # deg, largest angle change of one staggered joint iteration (ArmModel)
     backend: str = "auto"
+    # Newton directions from the last factorization this solver made (of a nearby tangent: an
+    # earlier iteration, or the previous solve of the same body), refined against the current
+    # tangent; a factorization only where the refinement does not contract (no hinge only)
+    reuse_factorization: bool = False
 
 
 @dataclass
@@ -53,6 +61,7 @@ class NewtonStatistics:
     time_solve: float = 0.0
     n_assemblies: int = 0
     n_factorizations: int = 0
+    n_reused: int = 0  # Newton directions from an earlier factorization (options.reuse_factorization)
     wall_time: float = 0.0
 
     def as_dict(self) -> dict:
@@ -66,6 +75,7 @@ class NewtonStatistics:
             "time_solve_s": self.time_solve,
             "assemblies": self.n_assemblies,
             "factorizations": self.n_factorizations,
+            "reused_factorizations": self.n_reused,
             "wall_time_s": self.wall_time,
         }
 
@@ -156,6 +166,7 @@ class QuasiStaticSolver:
         self.linear_solver = SparseSymmetricSolver(self.options.backend)
         self._K_ff: sp.csr_matrix | None = None
         self._factor_is_recent = False  # the factorization is of a tangent of the current solve
+        self._factorized = False  # the linear solver holds a factorization (of some earlier tangent)
         self._moment_offset = self._initial_moment_residual = 0.0
         if self.hinge is not None:
             # length that turns the hinge moment into a force for the combined residual norm
@@ -223,9 +234,14 @@ class QuasiStaticSolver:
         stats.n_assemblies += 1
         return K, f
 
+    def _factorize(self, K) -> None:
+        self._factorized = False
+        self.linear_solver.factorize(self._free_upper(K))
+        self._factorized = True
+
     def _factorize_and_solve(self, K, rhs, stats):
         t0 = time.perf_counter()
-        self.linear_solver.factorize(self._free_upper(K))
+        self._factorize(K)
         t1 = time.perf_counter()
         x = self.linear_solver.solve(rhs)
         stats.time_factorization += t1 - t0
@@ -258,7 +274,7 @@ class QuasiStaticSolver:
         self._moment_offset = 0.0
         K, f = self.tangent(np.asarray(u, dtype=float).ravel(), activation)
         r_theta, k_ft, k_tt = self._hinge_terms(np.asarray(u, dtype=float).ravel(), theta, K, f)
-        self.linear_solver.factorize(self._free_upper(K))
+        self._factorize(K)
         return r_theta, float(k_tt - k_ft @ self.linear_solver.solve(k_ft))
 
     def condensed_response(self, K: sp.csr_matrix, g: np.ndarray, reuse_factorization: bool = False,
@@ -285,7 +301,7 @@ class QuasiStaticSolver:
         b = k_f if force_rate is None else k_f + np.asarray(force_rate, dtype=float)[self.free]
         x = self._refined_solve(K, b) if reuse_factorization and self._factor_is_recent else None
         if x is None:
-            self.linear_solver.factorize(self._free_upper(K))
+            self._factorize(K)
             x = self.linear_solver.solve(b)
         du = np.asarray(g, dtype=float).copy()
         du[self.free] = -x
@@ -293,16 +309,41 @@ class QuasiStaticSolver:
 
     def _refined_solve(self, K: sp.csr_matrix, b: np.ndarray, rtol: float = 1e-10, steps: int = 4) -> np.ndarray | None:
         """K_ff x = b by iterative refinement on the current (nearby) factorization; None if it
-        does not reach ``rtol`` within ``steps`` corrections."""
+        does not reach ``rtol`` within ``steps`` corrections or a correction does not halve the
+        residual (the factorization is of a tangent too far from K: factorize instead)."""
+        if not self._factorized:
+            return None
         A = self._free_upper(K)  # only the matrix data: the factorization stays as it was
-        x = self.linear_solver.solve(b)
-        target = rtol * float(np.linalg.norm(b))
-        for _ in range(steps):
-            r = b - symmetric_matvec(A, x)
-            if float(np.linalg.norm(r)) <= target:
-                return x
-            x = x + self.linear_solver.solve(r)
+        try:
+            x = self.linear_solver.solve(b)
+            target = rtol * float(np.linalg.norm(b))
+            previous = float(np.linalg.norm(b))
+            for _ in range(steps):
+                r = b - symmetric_matvec(A, x)
+                size = float(np.linalg.norm(r))
+                if size <= target:
+                    return x
+                if size > 0.5 * previous:
+                    return None
+                previous = size
+                x = x + self.linear_solver.solve(r)
+        except SingularMatrixError:
+            return None
         return None
+
+    def _newton_direction(self, K, rhs, stats, rtol: float) -> np.ndarray:
+        """K_ff^-1 rhs: from the held factorization to ``rtol`` where options.reuse_factorization
+        allows and the refinement contracts (an inexact Newton step, Dembo-Eisenstat-Steihaug:
+        a relative linear residual below 1e-3 keeps the convergence superlinear), else factorized."""
+        if self.options.reuse_factorization:
+            t0 = time.perf_counter()
+            x = self._refined_solve(K, rhs, rtol=rtol, steps=8)
+            stats.time_solve += time.perf_counter() - t0
+            if x is not None:
+                stats.n_reused += 1
+                self._factor_is_recent = True  # near enough for condensed_response to try it too
+                return x
+        return self._factorize_and_solve(K, rhs, stats)
 
     def _residual_norm(self, f, r_theta):
         norm = float(np.linalg.norm(f[self.free]))
@@ -362,7 +403,9 @@ class QuasiStaticSolver:
                 return u, theta, K, f, history
             r = f[self.free]
             if self.hinge is None:
-                du, dtheta = self._factorize_and_solve(K, -r, stats), 0.0
+                # linear residual at most a tenth of what the Newton tolerance leaves (and 1e-3)
+                rtol = min(1e-3, 0.1 * tolerance / max(norm, 1e-300))
+                du, dtheta = self._newton_direction(K, -r, stats, rtol), 0.0
             else:
                 _, k_ft, k_tt = self._hinge_terms(u, theta, K, f)
                 x = self._factorize_and_solve(K, np.column_stack([-r, k_ft]), stats)
