@@ -92,6 +92,11 @@ class TableSolver:
         is second (a solve puts the insertion face where theta puts it)."""
         angles = self.table.angles_deg
         k, t = _bracket(angles, theta_deg)
+        # states this muscle solved before at this activation, closer together than the table's
+        kept = self.arm.units[muscle].library_guess(theta_deg, activation, angles[k + 1] - angles[k])
+        if kept is not None:
+            return MuscleState(float(theta_deg), self.length(muscle, theta_deg), float(activation), kept,
+                               float("nan"), float("nan"), float("nan"), 0.0)
         h = np.radians(angles[k + 1] - angles[k])
         # cubic Hermite basis: values at k, k+1; slopes (times the step, rad) at k, k+1
         basis = (2 * t**3 - 3 * t**2 + 1, -2 * t**3 + 3 * t**2, (t**3 - 2 * t**2 + t) * h, (t**3 - t**2) * h)

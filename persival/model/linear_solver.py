@@ -5,9 +5,13 @@ The tangent keeps its sparsity pattern for a whole solve, so PARDISO's symbolic 
 every Newton iteration only refactorizes numerically (phase 22). pypardiso's public
 ``factorize`` repeats the analysis every time and re-converts the index arrays on every call;
 we call MKL's pardiso through pypardiso's handle with index arrays converted once.
-The matrix is symmetric (hyperelastic tangent), so only the upper triangle is passed and
-PARDISO's symmetric-indefinite LDL^T (mtype -2) is used: half the memory and about half the
-flops of LU.
+The matrix is symmetric (hyperelastic tangent), so only the upper triangle is passed. A
+tangent at or near a stable equilibrium is positive definite, so Cholesky (mtype 2) is tried
+first: on the quick biceps (13632 DOF) 37 ms per factorization and 3.4 ms per solve against
+55 and 5.9 ms for the symmetric-indefinite LDL^T (mtype -2), same residual (2.5e-9). PARDISO
+reports a non-positive pivot (error -4, checked on a tangent shifted past its lowest
+eigenvalue), and the solver then takes LDL^T with Bunch-Kaufman pivoting for that tangent and
+the next few (slack, bowed muscles stay indefinite for a while).
 """
 
 from __future__ import annotations
@@ -51,75 +55,59 @@ class SingularMatrixError(RuntimeError):
     """The tangent could not be factorized (a mechanism, or a singular tangent)."""
 
 
-class SparseSymmetricSolver:
-    """Factorize a symmetric sparse matrix given by its upper triangle (CSR), then solve.
+class _PardisoHandle:
+    """One PARDISO handle of one matrix type; its symbolic analysis is kept per pattern."""
 
-    ``backend``: "pardiso", "scipy" or "auto" (PARDISO when importable).
-    """
-
-    def __init__(self, backend: str = "auto") -> None:
-        if backend == "auto":
-            backend = "pardiso" if HAVE_PARDISO else "scipy"
-        if backend == "pardiso" and not HAVE_PARDISO:
-            raise RuntimeError("pypardiso is not installed; use backend='scipy' or `pip install pypardiso`")
-        if backend not in ("pardiso", "scipy"):
-            raise ValueError(f"unknown sparse solver backend {backend!r}")
-        self.backend = backend
+    def __init__(self, mtype: int) -> None:
+        self.pardiso = _pypardiso.PyPardisoSolver(mtype=mtype)
+        # pypardiso looks for MKL with a recursive glob over sys.prefix on every solver it
+        # makes (0.8 s each, five per arm, profiled); the library it found is named once
+        os.environ.setdefault("PYPARDISO_MKL_RT", self.pardiso.libmkl._name)
+        # PARDISO reads iparm only when iparm[0] = 1; with pypardiso's 0 it fills in its own
+        # defaults, which (measured with MKL 2025 on the quick biceps, 13632 DOF) refine every
+        # solution twice even when no pivot was perturbed: a solve cost 60 ms beside a 115 ms
+        # factorization, 8 ms without the refinement at the same relative residual (1e-10).
+        # Set: the documented defaults of mtype -2, with refinement only where pivots were
+        # perturbed (iparm[7] = 0); callers that need more refine themselves (_refined_solve).
+        iparm = self.pardiso.iparm
+        iparm[:] = 0
+        iparm[0] = 1   # use these values
+        iparm[1] = 2   # METIS nested-dissection ordering
+        iparm[7] = 0   # iterative refinement: two steps only after perturbed pivots
+        iparm[9] = 8   # pivot perturbation 1e-8 (symmetric indefinite)
+        iparm[20] = 1  # Bunch-Kaufman 1x1 and 2x2 pivoting (symmetric indefinite)
         self._pattern: tuple[np.ndarray, np.ndarray] | None = None
         self._pattern_arrays: tuple = (None, None)
-        self._upper: sp.csr_matrix | None = None
-        self._lu = None
-        if backend == "pardiso":
-            self._pardiso = _pypardiso.PyPardisoSolver(mtype=-2)
-            # pypardiso looks for MKL with a recursive glob over sys.prefix on every solver it
-            # makes (0.8 s each, five per arm, profiled); the library it found is named once
-            os.environ.setdefault("PYPARDISO_MKL_RT", self._pardiso.libmkl._name)
-            # PARDISO reads iparm only when iparm[0] = 1; with pypardiso's 0 it fills in its own
-            # defaults, which (measured with MKL 2025 on the quick biceps, 13632 DOF) refine every
-            # solution twice even when no pivot was perturbed: a solve cost 60 ms beside a 115 ms
-            # factorization, 8 ms without the refinement at the same relative residual (1e-10).
-            # Set: the documented defaults of mtype -2, with refinement only where pivots were
-            # perturbed (iparm[7] = 0); callers that need more refine themselves (_refined_solve).
-            iparm = self._pardiso.iparm
-            iparm[:] = 0
-            iparm[0] = 1   # use these values
-            iparm[1] = 2   # METIS nested-dissection ordering
-            iparm[7] = 0   # iterative refinement: two steps only after perturbed pivots
-            iparm[9] = 8   # pivot perturbation 1e-8 (symmetric indefinite)
-            iparm[20] = 1  # Bunch-Kaufman 1x1 and 2x2 pivoting
+        self.data: np.ndarray | None = None
 
     def factorize(self, upper: sp.csr_matrix) -> None:
-        """Numerically factorize; the symbolic analysis is redone only when the pattern changes."""
-        if not np.all(np.isfinite(upper.data)):
-            raise SingularMatrixError("tangent matrix contains NaN or inf")
-        self._upper = upper
-        if self.backend == "pardiso":
-            try:
-                if not self._same_pattern(upper):
-                    self._pardiso._check_A(upper)  # sorted indices, no empty rows
-                    # PARDISO wants 1-based int32 index arrays: converted once per pattern
-                    self._ia = (upper.indptr + 1).astype(np.int32)
-                    self._ja = (upper.indices + 1).astype(np.int32)
-                    self._call(11, upper.data, np.zeros((upper.shape[0], 1)))
-                    self._pattern = (upper.indptr.copy(), upper.indices.copy())
-                    self._pattern_arrays = (upper.indptr, upper.indices)
-                self._call(22, upper.data, np.zeros((upper.shape[0], 1)))
-            except Exception as exc:  # PyPardisoError
-                self._pattern = None
-                raise SingularMatrixError(f"PARDISO factorization failed: {exc}") from exc
-        else:
-            full = upper + sp.triu(upper, k=1).T
-            try:
-                self._lu = spla.splu(full.tocsc(), permc_spec="COLAMD")
-            except RuntimeError as exc:
-                raise SingularMatrixError(f"SuperLU factorization failed: {exc}") from exc
+        """Numerically factorize (raises pypardiso's PyPardisoError); the symbolic analysis is
+        redone only when the pattern changes."""
+        self.data = None
+        try:
+            if not self._same_pattern(upper):
+                self.pardiso._check_A(upper)  # sorted indices, no empty rows
+                # PARDISO wants 1-based int32 index arrays: converted once per pattern
+                self._ia = (upper.indptr + 1).astype(np.int32)
+                self._ja = (upper.indices + 1).astype(np.int32)
+                self._call(11, upper.data, np.zeros((upper.shape[0], 1)))
+                self._pattern = (upper.indptr.copy(), upper.indices.copy())
+                self._pattern_arrays = (upper.indptr, upper.indices)
+            self._call(22, upper.data, np.zeros((upper.shape[0], 1)))
+        except Exception:
+            self._pattern = None
+            raise
+        self.data = upper.data
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        return self._call(33, self.data, rhs)
 
     def _call(self, phase: int, data: np.ndarray, b: np.ndarray) -> np.ndarray:
         """One PARDISO call on the cached pattern (what pypardiso's _call_pardiso does, minus
         re-converting the index arrays on every call)."""
         import ctypes
 
-        solver = self._pardiso
+        solver = self.pardiso
         b = np.asfortranarray(b, dtype=np.float64)
         x = np.zeros_like(b)
         error = ctypes.c_int32(0)
@@ -148,12 +136,73 @@ class SparseSymmetricSolver:
         indptr, indices = self._pattern
         return np.array_equal(indptr, upper.indptr) and np.array_equal(indices, upper.indices)
 
+
+class SparseSymmetricSolver:
+    """Factorize a symmetric sparse matrix given by its upper triangle (CSR), then solve.
+
+    ``backend``: "pardiso", "scipy" or "auto" (PARDISO when importable). PARDISO tries Cholesky
+    first and falls back to LDL^T for indefinite matrices (module docstring); ``definite``
+    says which one holds the current factorization.
+    """
+
+    indefinite_spell = 8  # factorizations that go straight to LDL^T after a failed Cholesky
+
+    def __init__(self, backend: str = "auto") -> None:
+        if backend == "auto":
+            backend = "pardiso" if HAVE_PARDISO else "scipy"
+        if backend == "pardiso" and not HAVE_PARDISO:
+            raise RuntimeError("pypardiso is not installed; use backend='scipy' or `pip install pypardiso`")
+        if backend not in ("pardiso", "scipy"):
+            raise ValueError(f"unknown sparse solver backend {backend!r}")
+        self.backend = backend
+        self._upper: sp.csr_matrix | None = None
+        self._lu = None
+        self._handles: dict[bool, _PardisoHandle] = {}
+        self._active: _PardisoHandle | None = None
+        self.definite = False
+        self._skip_cholesky = 0
+
+    def _handle(self, definite: bool) -> _PardisoHandle:
+        if definite not in self._handles:
+            self._handles[definite] = _PardisoHandle(2 if definite else -2)
+        return self._handles[definite]
+
+    def factorize(self, upper: sp.csr_matrix) -> None:
+        """Numerically factorize; the symbolic analysis is redone only when the pattern changes."""
+        if not np.all(np.isfinite(upper.data)):
+            raise SingularMatrixError("tangent matrix contains NaN or inf")
+        self._upper = upper
+        self._active = None
+        if self.backend == "pardiso":
+            if self._skip_cholesky > 0:
+                self._skip_cholesky -= 1
+            else:
+                try:
+                    self._handle(True).factorize(upper)
+                    self._active, self.definite = self._handles[True], True
+                    return
+                except _pypardiso.pardiso_wrapper.PyPardisoError as exc:
+                    if exc.value != -4:  # -4: a non-positive pivot, the matrix is not definite
+                        raise SingularMatrixError(f"PARDISO factorization failed: {exc}") from exc
+                    self._skip_cholesky = self.indefinite_spell
+            try:
+                self._handle(False).factorize(upper)
+            except Exception as exc:  # PyPardisoError
+                raise SingularMatrixError(f"PARDISO factorization failed: {exc}") from exc
+            self._active, self.definite = self._handles[False], False
+        else:
+            full = upper + sp.triu(upper, k=1).T
+            try:
+                self._lu = spla.splu(full.tocsc(), permc_spec="COLAMD")
+            except RuntimeError as exc:
+                raise SingularMatrixError(f"SuperLU factorization failed: {exc}") from exc
+
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        if self._upper is None:
+        if self._upper is None or (self.backend == "pardiso" and self._active is None):
             raise RuntimeError("factorize() must be called before solve()")
         if self.backend == "pardiso":
             rhs = np.asarray(rhs, dtype=float)
-            x = self._call(33, self._upper.data, rhs if rhs.ndim == 2 else rhs[:, None])
+            x = self._active.solve(rhs if rhs.ndim == 2 else rhs[:, None])
             x = x if rhs.ndim == 2 else x[:, 0]
         else:
             x = self._lu.solve(np.asarray(rhs, dtype=float))

@@ -220,18 +220,29 @@ class MuscleUnit:
         further: 100 to 200 Newton iterations by continuation); between solved neighbours it
         takes a few.
         """
+        guess = self.library_guess(theta_deg, activation, self.library_gap_deg)
+        return None if guess is None else self.solve_from_guess(theta_deg, activation, guess, progress)
+
+    def library_guess(self, theta_deg: float, activation: float, max_gap_deg: float) -> np.ndarray | None:
+        """The displacement at theta from the two kept states of this activation that bracket it
+        at most ``max_gap_deg`` apart (None if there are none): cubic Hermite in theta with their
+        du/dtheta, linear where one lacks it. A campaign keeps its solved states here, a few tenths
+        of a degree apart after a few hundred states, where the response tables are 5 deg apart."""
         states = self._library.get(activation)
         if not states:
             return None
-        angles = [s.angle_deg for s in states]
-        k = bisect.bisect_left(angles, theta_deg)
+        k = bisect.bisect_left([s.angle_deg for s in states], theta_deg)
         if k == 0 or k == len(states):
             return None
         lo, hi = states[k - 1], states[k]
-        if hi.angle_deg - lo.angle_deg > self.library_gap_deg:
+        if hi.angle_deg - lo.angle_deg > max_gap_deg:
             return None
-        w = (theta_deg - lo.angle_deg) / (hi.angle_deg - lo.angle_deg)
-        return self.solve_from_guess(theta_deg, activation, (1.0 - w) * lo.displacement + w * hi.displacement, progress)
+        t = (theta_deg - lo.angle_deg) / (hi.angle_deg - lo.angle_deg)
+        if lo.sensitivity is None or hi.sensitivity is None:
+            return (1.0 - t) * lo.displacement + t * hi.displacement
+        h = np.radians(hi.angle_deg - lo.angle_deg)
+        return ((2 * t**3 - 3 * t**2 + 1) * lo.displacement + (-2 * t**3 + 3 * t**2) * hi.displacement
+                + (t**3 - 2 * t**2 + t) * h * lo.sensitivity + (t**3 - t**2) * h * hi.sensitivity)
 
     def solve_from_guess(self, theta_deg: float, activation: float, guess: np.ndarray, progress=None,
                          max_iterations: int = 12, slope_from: MuscleState | None = None,
