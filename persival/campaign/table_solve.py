@@ -26,7 +26,7 @@ from scipy.optimize import brentq
 
 from persival.campaign.response_table import ResponseTable
 from persival.model.muscle_state import MuscleState
-from persival.model.muscle_unit import ConvergenceError
+from persival.model.muscle_unit import ConvergenceError, hermite_blend
 from persival.vocabulary import MUSCLES, check_activation_vector
 
 __all__ = ["TableSolver", "OutsideTableError"]
@@ -93,13 +93,18 @@ class TableSolver:
         angles = self.table.angles_deg
         k, t = _bracket(angles, theta_deg)
         # states this muscle solved before at this activation, closer together than the table's
-        kept = self.arm.units[muscle].library_guess(theta_deg, activation, angles[k + 1] - angles[k])
-        if kept is not None:
-            return MuscleState(float(theta_deg), self.length(muscle, theta_deg), float(activation), kept,
-                               float("nan"), float("nan"), float("nan"), 0.0)
+        guess = self.arm.units[muscle].library_guess(theta_deg, activation, angles[k + 1] - angles[k])
+        if guess is None:
+            guess = self._table_guess(muscle, k, t, activation)
+        if guess is None:
+            return None
+        return MuscleState(float(theta_deg), self.length(muscle, theta_deg), float(activation), guess,
+                           float("nan"), float("nan"), float("nan"), 0.0)
+
+    def _table_guess(self, muscle: str, k: int, t: float, activation: float) -> np.ndarray | None:
+        """Hermite in theta between table angles k and k + 1 (at t), linear in activation."""
+        angles = self.table.angles_deg
         h = np.radians(angles[k + 1] - angles[k])
-        # cubic Hermite basis: values at k, k+1; slopes (times the step, rad) at k, k+1
-        basis = (2 * t**3 - 3 * t**2 + 1, -2 * t**3 + 3 * t**2, (t**3 - 2 * t**2 + t) * h, (t**3 - t**2) * h)
         j, v = _bracket(self.table.levels, activation)
         guess = np.zeros((self.table.header["n_nodes"][muscle], 3))
         for weight, jj in ((1 - v, j), (v, j + 1)):
@@ -109,9 +114,8 @@ class TableSolver:
             d, s = col["displacement"][k : k + 2], col["sensitivity"][k : k + 2]
             if not (np.isfinite(d).all() and np.isfinite(s).all()):
                 return None
-            guess += weight * (basis[0] * d[0] + basis[1] * d[1] + basis[2] * s[0] + basis[3] * s[1])
-        return MuscleState(float(theta_deg), self.length(muscle, theta_deg), float(activation), guess,
-                           float("nan"), float("nan"), float("nan"), 0.0)
+            guess += weight * hermite_blend(t, h, d[0], d[1], s[0], s[1])
+        return guess
 
     def nearest(self, muscle: str, theta_deg: float, activation: float) -> MuscleState:
         """The finite table state nearest (theta, a) (theta in degrees counts like a in 1/30)."""

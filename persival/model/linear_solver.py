@@ -67,8 +67,9 @@ class _PardisoHandle:
         # defaults, which (measured with MKL 2025 on the quick biceps, 13632 DOF) refine every
         # solution twice even when no pivot was perturbed: a solve cost 60 ms beside a 115 ms
         # factorization, 8 ms without the refinement at the same relative residual (1e-10).
-        # Set: the documented defaults of mtype -2, with refinement only where pivots were
-        # perturbed (iparm[7] = 0); callers that need more refine themselves (_refined_solve).
+        # Set: the documented defaults of mtype -2 (its pivoting flags are ignored by Cholesky),
+        # with refinement only where pivots were perturbed (iparm[7] = 0); callers that need
+        # more refine themselves (_refined_solve).
         iparm = self.pardiso.iparm
         iparm[:] = 0
         iparm[0] = 1   # use these values
@@ -84,19 +85,18 @@ class _PardisoHandle:
         """Numerically factorize (raises pypardiso's PyPardisoError); the symbolic analysis is
         redone only when the pattern changes."""
         self.data = None
-        try:
-            if not self._same_pattern(upper):
-                self.pardiso._check_A(upper)  # sorted indices, no empty rows
-                # PARDISO wants 1-based int32 index arrays: converted once per pattern
-                self._ia = (upper.indptr + 1).astype(np.int32)
-                self._ja = (upper.indices + 1).astype(np.int32)
-                self._call(11, upper.data, np.zeros((upper.shape[0], 1)))
-                self._pattern = (upper.indptr.copy(), upper.indices.copy())
-                self._pattern_arrays = (upper.indptr, upper.indices)
-            self._call(22, upper.data, np.zeros((upper.shape[0], 1)))
-        except Exception:
+        if not self._same_pattern(upper):
             self._pattern = None
-            raise
+            self.pardiso._check_A(upper)  # sorted indices, no empty rows
+            # PARDISO wants 1-based int32 index arrays: converted once per pattern
+            self._ia = (upper.indptr + 1).astype(np.int32)
+            self._ja = (upper.indices + 1).astype(np.int32)
+            self._call(11, upper.data, np.zeros((upper.shape[0], 1)))
+            self._pattern = (upper.indptr.copy(), upper.indices.copy())
+            self._pattern_arrays = (upper.indptr, upper.indices)
+        # a failed numerical factorization (a Cholesky meeting a negative pivot) keeps the
+        # analysis: the next tangent of this pattern refactorizes without redoing it
+        self._call(22, upper.data, np.zeros((upper.shape[0], 1)))
         self.data = upper.data
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
@@ -155,7 +155,6 @@ class SparseSymmetricSolver:
         if backend not in ("pardiso", "scipy"):
             raise ValueError(f"unknown sparse solver backend {backend!r}")
         self.backend = backend
-        self._upper: sp.csr_matrix | None = None
         self._lu = None
         self._handles: dict[bool, _PardisoHandle] = {}
         self._active: _PardisoHandle | None = None
@@ -169,10 +168,9 @@ class SparseSymmetricSolver:
 
     def factorize(self, upper: sp.csr_matrix) -> None:
         """Numerically factorize; the symbolic analysis is redone only when the pattern changes."""
+        self._active = self._lu = None
         if not np.all(np.isfinite(upper.data)):
             raise SingularMatrixError("tangent matrix contains NaN or inf")
-        self._upper = upper
-        self._active = None
         if self.backend == "pardiso":
             if self._skip_cholesky > 0:
                 self._skip_cholesky -= 1
@@ -197,8 +195,13 @@ class SparseSymmetricSolver:
             except RuntimeError as exc:
                 raise SingularMatrixError(f"SuperLU factorization failed: {exc}") from exc
 
+    @property
+    def factorized(self) -> bool:
+        """Whether a factorization is held (the last factorize() succeeded)."""
+        return self._active is not None or self._lu is not None
+
     def solve(self, rhs: np.ndarray) -> np.ndarray:
-        if self._upper is None or (self.backend == "pardiso" and self._active is None):
+        if not self.factorized:
             raise RuntimeError("factorize() must be called before solve()")
         if self.backend == "pardiso":
             rhs = np.asarray(rhs, dtype=float)

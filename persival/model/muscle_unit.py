@@ -43,6 +43,13 @@ from persival.model.rotations import line_rotation
 from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
 
 
+def hermite_blend(t: float, h: float, u0: np.ndarray, u1: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
+    """Cubic Hermite interpolation at t in [0, 1] between states u0, u1 with slopes s0, s1
+    (per unit of the coordinate) over a step h of that coordinate."""
+    return ((2 * t**3 - 3 * t**2 + 1) * u0 + (-2 * t**3 + 3 * t**2) * u1
+            + (t**3 - 2 * t**2 + t) * h * s0 + (t**3 - t**2) * h * s1)
+
+
 class MuscleUnit:
     """The FE problem of one muscle with its elbow angle and activation prescribed."""
 
@@ -240,9 +247,8 @@ class MuscleUnit:
         t = (theta_deg - lo.angle_deg) / (hi.angle_deg - lo.angle_deg)
         if lo.sensitivity is None or hi.sensitivity is None:
             return (1.0 - t) * lo.displacement + t * hi.displacement
-        h = np.radians(hi.angle_deg - lo.angle_deg)
-        return ((2 * t**3 - 3 * t**2 + 1) * lo.displacement + (-2 * t**3 + 3 * t**2) * hi.displacement
-                + (t**3 - 2 * t**2 + t) * h * lo.sensitivity + (t**3 - t**2) * h * hi.sensitivity)
+        return hermite_blend(t, np.radians(hi.angle_deg - lo.angle_deg), lo.displacement, hi.displacement,
+                             lo.sensitivity, hi.sensitivity)
 
     def solve_from_guess(self, theta_deg: float, activation: float, guess: np.ndarray, progress=None,
                          max_iterations: int = 12, slope_from: MuscleState | None = None,
@@ -396,4 +402,4 @@ class MuscleUnit:
         return float(self.direction @ solution.reactions["insertion"].force)
 
 
-__all__ = ["ConvergenceError", "MusclePath", "MuscleState", "MuscleUnit", "line_rotation"]
+__all__ = ["ConvergenceError", "MusclePath", "MuscleState", "MuscleUnit", "hermite_blend", "line_rotation"]

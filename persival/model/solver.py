@@ -166,7 +166,6 @@ class QuasiStaticSolver:
         self.linear_solver = SparseSymmetricSolver(self.options.backend)
         self._K_ff: sp.csr_matrix | None = None
         self._factor_is_recent = False  # the factorization is of a tangent of the current solve
-        self._factorized = False  # the linear solver holds a factorization (of some earlier tangent)
         self._moment_offset = self._initial_moment_residual = 0.0
         if self.hinge is not None:
             # length that turns the hinge moment into a force for the combined residual norm
@@ -234,14 +233,9 @@ class QuasiStaticSolver:
         stats.n_assemblies += 1
         return K, f
 
-    def _factorize(self, K) -> None:
-        self._factorized = False
-        self.linear_solver.factorize(self._free_upper(K))
-        self._factorized = True
-
     def _factorize_and_solve(self, K, rhs, stats):
         t0 = time.perf_counter()
-        self._factorize(K)
+        self.linear_solver.factorize(self._free_upper(K))
         t1 = time.perf_counter()
         x = self.linear_solver.solve(rhs)
         stats.time_factorization += t1 - t0
@@ -274,7 +268,7 @@ class QuasiStaticSolver:
         self._moment_offset = 0.0
         K, f = self.tangent(np.asarray(u, dtype=float).ravel(), activation)
         r_theta, k_ft, k_tt = self._hinge_terms(np.asarray(u, dtype=float).ravel(), theta, K, f)
-        self._factorize(K)
+        self.linear_solver.factorize(self._free_upper(K))
         return r_theta, float(k_tt - k_ft @ self.linear_solver.solve(k_ft))
 
     def condensed_response(self, K: sp.csr_matrix, g: np.ndarray, reuse_factorization: bool = False,
@@ -301,7 +295,7 @@ class QuasiStaticSolver:
         b = k_f if force_rate is None else k_f + np.asarray(force_rate, dtype=float)[self.free]
         x = self._refined_solve(K, b) if reuse_factorization and self._factor_is_recent else None
         if x is None:
-            self._factorize(K)
+            self.linear_solver.factorize(self._free_upper(K))
             x = self.linear_solver.solve(b)
         du = np.asarray(g, dtype=float).copy()
         du[self.free] = -x
@@ -311,7 +305,7 @@ class QuasiStaticSolver:
         """K_ff x = b by iterative refinement on the current (nearby) factorization; None if it
         does not reach ``rtol`` within ``steps`` corrections or a correction does not halve the
         residual (the factorization is of a tangent too far from K: factorize instead)."""
-        if not self._factorized:
+        if not self.linear_solver.factorized:
             return None
         A = self._free_upper(K)  # only the matrix data: the factorization stays as it was
         try:
