@@ -44,10 +44,11 @@ def solver(arm):
 
 @pytest.mark.slow
 def test_exact_path_is_the_direct_coupled_solve(arm, solver, capsys):
-    """Same converged FE state: theta within 0.05 deg and every node within 0.01 mm (issue 17)."""
+    """Same converged FE state for an off-level activation vector (Newton from a level's state):
+    theta within 0.05 deg and every node within 0.01 mm (issue 17; on-level: tests/test_arm_solve.py)."""
     hanging = arm.base_state()
     rng = np.random.default_rng(3)
-    for alpha in (np.array([0.5, 0.0, 0.0, 0.0, 0.5]), rng.uniform(0.0, 1.0, 5)):
+    for alpha in (rng.uniform(0.0, 1.0, 5),):
         exact = solver.solve(alpha, near_deg=hanging.elbow_angle_deg)
         direct = arm.solve(alpha)
         node_error = np.abs(exact.displacement - direct.displacement).max()
