@@ -44,7 +44,7 @@ lint: setup
 	$(BIN)/ruff check persival tests
 
 test: setup chromium lint
-	$(BIN)/pytest -n 2 --dist loadgroup -q
+	$(BIN)/pytest -n 2 --dist loadfile -q
 
 bench: setup
 	$(BIN)/persival bench fe

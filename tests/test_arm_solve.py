@@ -3,8 +3,10 @@
 One module-scoped set of states keeps the suite fast: the hanging arm and the biceps at 0.5
 by the direct coupled continuation (its progress reports, its retries), then the biceps at 1
 and the triceps added to the biceps at 0.5 by the exact path on the response-table fixture
-(converged FE states too: the first test below checks the two paths agree). The module runs on
-one xdist worker (``xdist_group``, ``--dist loadgroup``): its states are solved once.
+(converged FE states too: the first test below checks the two paths agree). The suite runs with
+``--dist loadfile``: a module's tests run together on one xdist worker, so its module fixtures
+are built once (with ``--dist load`` each worker built them, and again whenever other modules'
+tests came in between: 4 builds of these states, 360 to 720 s each of CPU).
 """
 
 import json
@@ -19,8 +21,6 @@ from persival.campaign.table_solve import TableSolver
 from persival.model.arm import ArmModel
 from persival.model.solver import ConvergenceError
 from persival.model.state_cache import mesh_fingerprint
-
-pytestmark = pytest.mark.xdist_group("coarse_arm_states")
 
 FIXTURE = Path(__file__).parent / "data" / "response_table_coarse"
 
