@@ -15,15 +15,25 @@ from pathlib import Path
 
 import pytest
 
+SEED_CACHE = Path(__file__).parent / "data" / "state_cache"
+
 
 def pytest_configure(config):
     """The on-disk state cache (persival.model.state_cache) of a test run is a fresh folder of
     that run, shared by its xdist workers (they inherit the variable; entries are keyed by model
-    and mesh and written atomically), never the user's ~/.cache."""
+    and mesh and written atomically), never the user's ~/.cache. It starts with the coarse arm's
+    rest states and hanging arm (tests/data/state_cache, tests/data/README.md): every module that
+    solves the coarse arm needs them, and each xdist worker solved them again (80 to 180 s of
+    continuation from the mesh poses). A seed of another model or mesh sits under another key and
+    is never read; a read one is re-converged, not trusted (ArmModel.base_state)."""
     if not os.environ.get("PERSIVAL_TEST_CACHE_SET"):
+        import shutil
         import tempfile
 
-        os.environ["PERSIVAL_CACHE"] = tempfile.mkdtemp(prefix="persival-test-cache-")
+        root = tempfile.mkdtemp(prefix="persival-test-cache-")
+        if SEED_CACHE.is_dir():
+            shutil.copytree(SEED_CACHE, root, dirs_exist_ok=True)
+        os.environ["PERSIVAL_CACHE"] = root
         os.environ["PERSIVAL_TEST_CACHE_SET"] = "1"
 
 
