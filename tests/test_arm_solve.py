@@ -5,8 +5,9 @@ by the direct coupled continuation (its progress reports, its retries), then the
 and the triceps added to the biceps at 0.5 by the exact path on the response-table fixture
 (converged FE states too: the first test below checks the two paths agree). The suite runs with
 ``--dist loadfile``: a module's tests run together on one xdist worker, so its module fixtures
-are built once (with ``--dist load`` each worker built them, and again whenever other modules'
-tests came in between: 4 builds of these states, 360 to 720 s each of CPU).
+are built once (with ``--dist load`` both workers built the states, 342 and 379 s; with
+``loadgroup`` they were rebuilt whenever another module's tests came in between: four builds
+of 180 to 270 s).
 """
 
 import json
