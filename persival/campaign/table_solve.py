@@ -26,7 +26,8 @@ from scipy.optimize import brentq
 
 from persival.campaign.response_table import ResponseTable
 from persival.model.muscle_state import MuscleState
-from persival.model.muscle_unit import ConvergenceError, hermite_blend
+from persival.model.muscle_unit import ConvergenceError
+from persival.model.state_library import hermite_blend
 from persival.vocabulary import MUSCLES, check_activation_vector
 
 __all__ = ["TableSolver", "OutsideTableError"]
@@ -93,7 +94,7 @@ class TableSolver:
         angles = self.table.angles_deg
         k, t = _bracket(angles, theta_deg)
         # states this muscle solved before at this activation, closer together than the table's
-        guess = self.arm.units[muscle].library_guess(theta_deg, activation, angles[k + 1] - angles[k])
+        guess = self.arm.units[muscle].library.guess(theta_deg, activation, angles[k + 1] - angles[k])
         if guess is None:
             guess = self._table_guess(muscle, k, t, activation)
         if guess is None:

@@ -23,12 +23,11 @@ own moment balance), so nothing is lost.
 This turns the joint equilibrium into one scalar equation in theta (see ArmModel), and each
 muscle into a small FE problem solved on its own: five solves of a few thousand DOFs instead
 of one of all of them, and a library of solved (theta, a) states per muscle that warm-starts
-every new state by interpolation.
+every new state by interpolation (persival.model.state_library).
 """
 
 from __future__ import annotations
 
-import bisect
 from collections.abc import Callable
 from dataclasses import replace
 
@@ -41,13 +40,7 @@ from persival.model.mesh import Tet10Mesh
 from persival.model.muscle_state import MusclePath, MuscleState
 from persival.model.rotations import line_rotation
 from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
-
-
-def hermite_blend(t: float, h: float, u0: np.ndarray, u1: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
-    """Cubic Hermite interpolation at t in [0, 1] between states u0, u1 with slopes s0, s1
-    (per unit of the coordinate) over a step h of that coordinate."""
-    return ((2 * t**3 - 3 * t**2 + 1) * u0 + (-2 * t**3 + 3 * t**2) * u1
-            + (t**3 - 2 * t**2 + t) * h * s0 + (t**3 - t**2) * h * s1)
+from persival.model.state_library import StateLibrary
 
 
 class MuscleUnit:
@@ -56,8 +49,6 @@ class MuscleUnit:
     small_step_mm = 1.0  # length changes up to this are taken in one load step (then halved if needed)
     small_step_deg = 5.0  # ... if the angle moves no more than this either (the bones move with it)
     library_gap_deg = 10.0  # solved states at most this far apart are interpolated as a start
-    library_spacing_deg = 0.2  # a new state this close to a kept one is not kept
-    library_size = 600  # states kept per muscle (each n_nodes x 3 floats)
     contact_step_deg = 0.05  # central differences of the contact energy in theta (exact up to ~1e-6)
 
     def __init__(self, name: str, mesh: Tet10Mesh, material: MaterialField, path: MusclePath,
@@ -85,8 +76,8 @@ class MuscleUnit:
         # the insertion face's unit axial translation: dx/dL of the constrained DOFs
         self._axial = np.zeros(self.assembler.n_dofs)
         self._axial[self._insertion_face.dofs] = np.tile(self.direction, len(self._insertion_face.nodes))
-        # solved states by activation, sorted by angle: starts for later solves (_from_library)
-        self._library: dict[float, list[MuscleState]] = {}
+        # solved states: starts for later solves (_from_library, TableSolver.guess)
+        self.library = StateLibrary()
 
     @property
     def options(self) -> SolverOptions:
@@ -211,7 +202,7 @@ class MuscleUnit:
             state = None if near else self._from_library(theta_deg, activation, progress)
         if state is None:
             state = self._continue(theta_deg, activation, start, progress=progress)
-        self._remember(state)
+        self.library.add(state)
         return state
 
     def _is_near(self, theta_deg: float, activation: float, start: MuscleState) -> bool:
@@ -227,28 +218,8 @@ class MuscleUnit:
         further: 100 to 200 Newton iterations by continuation); between solved neighbours it
         takes a few.
         """
-        guess = self.library_guess(theta_deg, activation, self.library_gap_deg)
+        guess = self.library.guess(theta_deg, activation, self.library_gap_deg)
         return None if guess is None else self.solve_from_guess(theta_deg, activation, guess, progress)
-
-    def library_guess(self, theta_deg: float, activation: float, max_gap_deg: float) -> np.ndarray | None:
-        """The displacement at theta from the two kept states of this activation that bracket it
-        at most ``max_gap_deg`` apart (None if there are none): cubic Hermite in theta with their
-        du/dtheta, linear where one lacks it. A campaign keeps its solved states here, a few tenths
-        of a degree apart after a few hundred states, where the response tables are 5 deg apart."""
-        states = self._library.get(activation)
-        if not states:
-            return None
-        k = bisect.bisect_left([s.angle_deg for s in states], theta_deg)
-        if k == 0 or k == len(states):
-            return None
-        lo, hi = states[k - 1], states[k]
-        if hi.angle_deg - lo.angle_deg > max_gap_deg:
-            return None
-        t = (theta_deg - lo.angle_deg) / (hi.angle_deg - lo.angle_deg)
-        if lo.sensitivity is None or hi.sensitivity is None:
-            return (1.0 - t) * lo.displacement + t * hi.displacement
-        return hermite_blend(t, np.radians(hi.angle_deg - lo.angle_deg), lo.displacement, hi.displacement,
-                             lo.sensitivity, hi.sensitivity)
 
     def solve_from_guess(self, theta_deg: float, activation: float, guess: np.ndarray, progress=None,
                          max_iterations: int = 12, slope_from: MuscleState | None = None,
@@ -282,15 +253,6 @@ class MuscleUnit:
             return replace(state, moment_slope=slope_from.moment_slope, sensitivity=slope_from.sensitivity,
                            max_volume_change=solution.max_volume_change, iterations=solution.statistics.iterations)
         return self._state(theta_deg, activation, solution)
-
-    def _remember(self, state: MuscleState) -> None:
-        states = self._library.setdefault(state.activation, [])
-        angles = [s.angle_deg for s in states]
-        k = bisect.bisect_left(angles, state.angle_deg)
-        near = [s for s in states[max(k - 1, 0) : k + 1] if abs(s.angle_deg - state.angle_deg) < self.library_spacing_deg]
-        if near or sum(len(v) for v in self._library.values()) >= self.library_size:
-            return
-        states.insert(k, state)
 
     def _continue(self, theta_deg: float, activation: float, start: MuscleState, detour: bool = True,
                   progress=None) -> MuscleState:
@@ -402,4 +364,4 @@ class MuscleUnit:
         return float(self.direction @ solution.reactions["insertion"].force)
 
 
-__all__ = ["ConvergenceError", "MusclePath", "MuscleState", "MuscleUnit", "hermite_blend", "line_rotation"]
+__all__ = ["ConvergenceError", "MusclePath", "MuscleState", "MuscleUnit", "line_rotation"]
