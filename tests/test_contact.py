@@ -223,9 +223,10 @@ def test_surface_weights_and_rigid_bone_motion():
     assert np.allclose(g, 7.0 - distance, atol=1e-6) and np.allclose(g_moved, g)
 
 
-def wrapped_unit(with_bone: bool, activation_mesh_deg: float = 0.0):
+def wrapped_unit(with_bone: bool, activation_mesh_deg: float = 0.0, tie: str = "line"):
     """The wrapped muscle above as a MuscleUnit: origin fixed, insertion on a forearm turning about
-    the x axis (the hinge), the cylinder (R = 8 mm) on that axis as its bone (SPEC 3.3 contact)."""
+    the x axis (the hinge), the cylinder (R = 8 mm) on that axis as its bone (SPEC 3.3 contact);
+    ``tie``: the insertion face's tie (persival.model.insertion_ties)."""
     from persival.model.muscle_unit import MusclePath, MuscleUnit
 
     R, r_t = 8.0, 2.5
@@ -246,7 +247,8 @@ def wrapped_unit(with_bone: bool, activation_mesh_deg: float = 0.0):
 
     bone = Capsule([-30.0, 0.0, 0.0], [30.0, 0.0, 0.0], R, "trochlea")
     path = MusclePath(ends["origin"], insertion, geometry, activation_mesh_deg,
-                      bones=(lambda theta: [bone]) if with_bone else None, penalty=5.0)
+                      bones=(lambda theta: [bone]) if with_bone else None, penalty=5.0,
+                      insertion_tie=tie, hinge=(np.zeros(3), axis))
     return MuscleUnit("biceps", mesh, material, path, SolverOptions(atol=1e-8)), R + r_t
 
 
@@ -304,3 +306,50 @@ def test_muscle_unit_over_the_trochlea_keeps_its_moment_arm(capsys):
                   f"penetration {state.max_penetration:.3f} mm")
     assert 0.85 * floor < arms[True] < 1.35 * floor  # 13.0 mm measured: the face reactions act off the centre line
     assert arms[False] < 0.0  # the straight muscle's line passes behind the hinge
+
+
+@pytest.mark.parametrize("with_bone", [False, True])
+def test_forearm_tied_unit_moment_is_the_face_reaction_about_the_hinge(with_bone, capsys):
+    """Insertion face rigid with the forearm (SPEC 3.3 read literally): the unit solves in the world
+    frame, its face turns with theta about the hinge, and its moment is the hinge moment of the
+    face's reaction; the whole muscle is in moment balance about the hinge axis (origin face,
+    insertion face and the bone's push); slope and du/dtheta match central differences of solves."""
+    unit, _ = wrapped_unit(with_bone, tie="forearm")
+    theta, h, a = -6.0, 0.25, 0.3
+    states = {}
+    start = unit.solve(theta - 2 * h, a)
+    for t in (theta - h, theta, theta + h):
+        states[t] = start = unit.solve(t, a, start)
+    state = states[theta]
+    assert np.allclose(unit.rotation(theta), np.eye(3))
+    unit._set_path(theta, theta)
+    _, f = unit.solver.tangent(state.displacement.ravel(), np.full(unit.mesh.n_cells, a))
+    x = unit.mesh.points + state.displacement
+    f = f.reshape(-1, 3)
+    axis_moment = {end: float(np.cross(x[unit.mesh.node_sets[end]], f[unit.mesh.node_sets[end]]).sum(axis=0)[0])
+                   for end in ("origin", "insertion")}
+    # the face really turned with the forearm: its nodes sit where R(theta - theta_mesh) puts them
+    face = unit.mesh.node_sets["insertion"]
+    assert np.allclose(x[face], unit.mesh.points[face] @ rotation_about([1.0, 0.0, 0.0], theta).T, atol=1e-9)
+    bone_push = 0.0
+    if with_bone:
+        assert state.contact_force > 1.0 and state.max_penetration < 0.5
+        loads = unit.contact.obstacle_loads(x, np.zeros(3))
+        bone_push = sum(float(m[0]) for _, m in loads.values())  # on the bones: minus that on the muscle
+    slope = (states[theta + h].moment - states[theta - h].moment) / np.radians(2 * h)
+    du = (states[theta + h].displacement - states[theta - h].displacement) / np.radians(2 * h)
+    with capsys.disabled():
+        print(f"\nbone={with_bone}: moment {state.moment:.4f} N mm, insertion face about the hinge "
+              f"{-axis_moment['insertion']:.4f}, origin face {axis_moment['origin']:.4f}, bone {bone_push:.4f}; "
+              f"slope {state.moment_slope:.3f} vs central difference {slope:.3f} N mm/rad")
+    assert state.moment == pytest.approx(-axis_moment["insertion"], rel=1e-6)
+    total = axis_moment["origin"] + axis_moment["insertion"] - bone_push
+    assert abs(total) < 1e-5 * max(abs(v) for v in axis_moment.values())
+    assert state.moment_slope == pytest.approx(slope, rel=2e-3)
+    # on the bone, the nodes whose contact switches on within theta +- h bound the central difference's accuracy
+    error = np.abs(state.sensitivity - du).max(axis=1)
+    with capsys.disabled():
+        near = np.argsort(error)[-5:]
+        print(f"largest du errors {np.round(error[near], 4)} mm/rad, nodes {np.round(np.linalg.norm(x[near, 1:], axis=1), 2)} "
+              f"mm from the bone's axis; max |du| {np.abs(du).max():.3f}")
+    assert error.max() < (5e-3 if with_bone else 2e-3) * np.abs(du).max()

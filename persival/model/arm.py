@@ -99,6 +99,8 @@ class ArmModel(ArmBody):
             mesh_angle_deg=muscle.mesh_angle_deg,
             bones=self._bones_of(muscle) if muscle.wraps else None,
             penalty=self.spec.contact.penalty,
+            insertion_tie=muscle.insertion_tie,
+            hinge=(self.centre, self.axis),
         )
         return MuscleUnit(muscle.name, mesh, material, path, self.options)
 
@@ -356,9 +358,14 @@ class ArmModel(ArmBody):
         every muscle's faces tied to the elbow (ball joints on the lines of action,
         :class:`Hinge`), the whole mesh assembled at once. Returns the largest nodal force
         residual of the free DOFs (N) and the hinge's moment residual from virtual work,
-        f . dx/dtheta - M_ext (N mm)."""
+        f . dx/dtheta - M_ext (N mm). Only for line-tied muscles without bones (the monolithic
+        form has neither contact terms nor forearm ties)."""
         nodes, reference, O, I, is_insertion, counts = [], [], [], [], [], []
         muscles = self.spec.ordered_muscles()
+        other = [m.name for m in muscles if m.wraps or m.insertion_tie != "line"]
+        if other:
+            raise ValueError(f"verify_equilibrium checks line-tied muscles without bones; {other} have bones or "
+                             "forearm ties (their own checks: tests/test_contact.py)")
         for m in muscles:
             insertion_ref = self.body_end(m, m.mesh_angle_deg)
             for end in ("origin", "insertion"):

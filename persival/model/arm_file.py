@@ -85,6 +85,9 @@ class Muscle(_Strict):
     wrap_radius: float = Field(0.0, ge=0, description="mm: the path wraps a cylinder of this radius on the hinge axis "
                                                       "(0: a straight path; persival.model.wrapping)")
     wrap_cable: float = Field(0.0, ge=0, description="mm of the wrapped path that is inextensible cable, not FE body")
+    insertion_tie: Literal["line", "forearm"] = Field(
+        "line", description="line: both end faces ball joints on the line of action; forearm: the insertion face "
+                            "rigid with the forearm, the origin face with the humerus (persival.model.insertion_ties)")
     mesh_angle_deg: float = Field(description="elbow angle of the stress-free mesh pose")
     bow: float = Field(0.0, ge=0, description="mm: sagitta of a sine bow of the centre line away from the hinge")
     belly_radius: float = Field(gt=0)
@@ -107,6 +110,9 @@ class Muscle(_Strict):
             raise ValueError(f"muscle {self.name!r}: a wrapped path (wrap_radius) takes no via points")
         if self.wrap_cable > 0 and self.wrap_radius == 0:
             raise ValueError(f"muscle {self.name!r}: wrap_cable needs a wrap_radius")
+        if self.insertion_tie == "forearm" and self.wrap_radius > 0:
+            raise ValueError(f"muscle {self.name!r}: a forearm-tied insertion face rides the forearm, not a wrapped "
+                             "path's end (drop wrap_radius or use insertion_tie = \"line\")")
         return self
 
     @model_validator(mode="after")

@@ -41,6 +41,8 @@ class MusclePath:
     ``geometry(theta) -> (L, dL/dtheta, d2L/dtheta2)`` (mm, per radian); ``insertion(theta)``
     the world insertion point; ``bones(theta)`` the rigid obstacles (world frame) the muscle
     wraps over, with the penalty ``penalty`` (N/mm^3; SPEC 3.3 contact); none: no contact.
+    ``insertion_tie``: "line" (ball joints on the line of action) or "forearm" (the insertion
+    face rigid with the forearm about ``hinge`` = (centre, axis)); persival.model.insertion_ties.
     """
 
     origin: np.ndarray
@@ -49,3 +51,5 @@ class MusclePath:
     mesh_angle_deg: float
     bones: Callable[[float], Sequence] | None = None
     penalty: float = 0.0
+    insertion_tie: str = "line"
+    hinge: tuple[np.ndarray, np.ndarray] | None = None

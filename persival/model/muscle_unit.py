@@ -1,6 +1,6 @@
 """One muscle-tendon unit between its origin and insertion faces, solved in its own frame.
 
-SPEC 3.3 ties each muscle's end faces to its line of action (ball joints: the origin face
+SPEC 3.3 ties each muscle's end faces to its line of action by default (ball joints: the origin face
 turns about the fixed origin point O, the insertion face rides on the forearm's insertion
 point I(theta), and both faces turn by the minimal rotation Q(theta) that takes the mesh-pose
 line direction d_ref to the current one d(theta); see :class:`~persival.model.constraints.Hinge`).
@@ -10,6 +10,10 @@ elbow angle theta is exactly the rigid motion ``x = O + Q(theta) (y - O)`` of th
 d_ref by ``L(theta) - L_mesh`` (L = |I - O|), and the bones the muscle wraps over (SPEC 3.3
 contact) turned into that frame by ``Q(theta)^T`` about O. A muscle's state therefore depends on
 two numbers, the elbow angle theta and its activation a, and nothing of the other muscles.
+A muscle may instead tie its insertion face rigidly to the forearm (``insertion_tie =
+"forearm"``; persival.model.insertion_ties): it is then solved in the world frame, Q = I, with
+the face turning about the hinge, and ``T L'`` below becomes the virtual work ``f . dp/dtheta`` of
+the face's reaction.
 
 Its work on the joint follows from the envelope theorem applied to
 ``Pi*(theta) = min_y [Pi_m(y; L(theta)) + Pi_c(y; theta)]``:
@@ -36,9 +40,9 @@ import numpy as np
 from persival.model.assembly import MaterialField, Tet10Assembler
 from persival.model.constraints import Dirichlet
 from persival.model.contact import ObstacleContact
+from persival.model.insertion_ties import ForearmTie, LineTie
 from persival.model.mesh import Tet10Mesh
 from persival.model.muscle_state import MusclePath, MuscleState
-from persival.model.rotations import line_rotation
 from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
 from persival.model.state_library import StateLibrary
 
@@ -59,23 +63,23 @@ class MuscleUnit:
         self.path = path
         self.origin = np.asarray(path.origin, dtype=float)
         self.mesh_angle_deg = float(path.mesh_angle_deg)
-        axis = np.asarray(path.insertion(self.mesh_angle_deg), dtype=float) - self.origin
-        self.mesh_length = float(np.linalg.norm(axis))
-        if self.mesh_length <= 0:
-            raise ValueError(f"muscle {name!r}: origin and insertion coincide")
-        self.direction = axis / self.mesh_length
+        ties = {"line": LineTie, "forearm": ForearmTie}
+        if path.insertion_tie not in ties:
+            raise ValueError(f"muscle {name!r}: insertion_tie must be one of {sorted(ties)}, got {path.insertion_tie!r}")
         self.assembler = Tet10Assembler(mesh)
+        try:
+            self.tie = ties[path.insertion_tie](mesh.node_sets["insertion"], self.assembler.n_dofs, self.origin, path)
+        except ValueError as exc:
+            raise ValueError(f"muscle {name!r}: {exc}") from None
+        self.mesh_length, self.direction = self.tie.mesh_length, self.tie.direction
         self._origin_face = Dirichlet("origin", mesh.node_sets["origin"])
-        self._insertion_face = Dirichlet("insertion", mesh.node_sets["insertion"])
+        self._insertion_face = self.tie.constraint
         self.contact = None
         if path.bones is not None and len(path.bones(self.mesh_angle_deg)):
             tied = np.concatenate([self._origin_face.nodes, self._insertion_face.nodes])
             self.contact = ObstacleContact.at_nodes(mesh, self.obstacles(self.mesh_angle_deg), path.penalty, exclude=tied)
         self.solver = QuasiStaticSolver(mesh, material, [self._origin_face, self._insertion_face], options,
                                         assembler=self.assembler, extra_terms=[self.contact] if self.contact else None)
-        # the insertion face's unit axial translation: dx/dL of the constrained DOFs
-        self._axial = np.zeros(self.assembler.n_dofs)
-        self._axial[self._insertion_face.dofs] = np.tile(self.direction, len(self._insertion_face.nodes))
         # solved states: starts for later solves (_from_library, TableSolver.guess)
         self.library = StateLibrary()
 
@@ -97,19 +101,19 @@ class MuscleUnit:
         depends on L alone, however L turns with theta), theta itself (rad) with bones or where
         L' vanishes (a state's du/dtheta = L' du/dL then tells nothing of du/dL). Extrapolations
         from a state at ``reference_deg`` run in it."""
-        if self.contact is None:
+        if self.contact is None and self.tie.keyed_by_length:
             _, dL, _ = self.path.geometry(reference_deg)
             if abs(dL) > 1e-6:
                 return self.length, float(dL)
         return (lambda theta: float(np.radians(theta))), 1.0
 
     def rotation(self, theta_deg: float) -> np.ndarray:
-        """Q(theta): the minimal rotation of the mesh-pose line of action onto the current one."""
-        d = np.asarray(self.path.insertion(theta_deg), dtype=float) - self.origin
-        return line_rotation(self.direction, d / np.linalg.norm(d))
+        """Q(theta): the rotation of the unit's frame (the line tie's turn of the line of action;
+        the identity for a forearm tie, solved in the world frame)."""
+        return self.tie.rotation(theta_deg)
 
     def obstacles(self, theta_deg: float) -> list:
-        """The bones at theta in the muscle's mesh-pose frame: turned by Q(theta)^T about O."""
+        """The bones at theta in the muscle's frame: turned by Q(theta)^T about O."""
         if self.path.bones is None:
             return []
         back = self.rotation(theta_deg).T
@@ -121,9 +125,8 @@ class MuscleUnit:
         return self.origin + (y - self.origin) @ self.rotation(state.angle_deg).T
 
     def _set_path(self, theta_from: float, theta_to: float) -> None:
-        """The load steps' path: insertion face from L(theta_from) to L(theta_to), bones along."""
-        self._insertion_face.start[:] = (self.length(theta_from) - self.mesh_length) * self.direction
-        self._insertion_face.end[:] = (self.length(theta_to) - self.mesh_length) * self.direction
+        """The load steps' path: insertion face from theta_from to theta_to, bones along."""
+        self.tie.set_path(theta_from, theta_to)
         if self.contact is not None:
             self.contact.pose = lambda t: self.obstacles(theta_from + t * (theta_to - theta_from))
             self.contact.set_load_factor(0.0)
@@ -236,7 +239,7 @@ class MuscleUnit:
         # L(theta) at second order, and a face jump costs the solver a predictor solve
         guess = np.array(guess, dtype=float, copy=True)
         guess[self._origin_face.nodes] = 0.0
-        guess[self._insertion_face.nodes] = self._insertion_face.end
+        guess[self._insertion_face.nodes] = self._insertion_face.values(self.mesh.points, 1.0).reshape(-1, 3)
         options = self.solver.options
         self.solver.options = replace(options, initial_step=1.0, min_step=1.0,
                                       max_iterations=min(options.max_iterations, max_iterations),
@@ -249,7 +252,7 @@ class MuscleUnit:
         finally:
             self.solver.options = options
         if slope_from is not None:
-            state = self._scalars(theta_deg, activation, solution.displacement, self._tension(solution))
+            state = self._scalars(theta_deg, activation, solution.displacement, solution.internal_force)
             return replace(state, moment_slope=slope_from.moment_slope, sensitivity=slope_from.sensitivity,
                            max_volume_change=solution.max_volume_change, iterations=solution.statistics.iterations)
         return self._state(theta_deg, activation, solution)
@@ -293,18 +296,19 @@ class MuscleUnit:
     def _state(self, theta_deg: float, activation: float, solution) -> MuscleState:
         """The converged solution's state; its tangent (preconditioned by the last factorization)
         gives the moment slope and du/dtheta without a factorization of its own."""
-        state = self.response(theta_deg, activation, solution.displacement, solution.tangent, self._tension(solution))
+        state = self.response(theta_deg, activation, solution.displacement, solution.tangent, solution.internal_force)
         return replace(state, max_volume_change=solution.max_volume_change, iterations=solution.statistics.iterations)
 
     def response(self, theta_deg: float, activation: float, displacement: np.ndarray, K=None,
-                 tension: float | None = None) -> MuscleState:
+                 force: np.ndarray | None = None) -> MuscleState:
         """The state of an equilibrium u at (theta, a): tension, moment M = -dPi*/dtheta, its slope
         and du/dtheta (SPEC 3.3; module docstring). With theta moving, the insertion face moves by
-        ``L' g`` (g: the axial unit motion) and the bones' forces change at fixed u by ``df_c/dtheta``:
+        ``g = dp/dtheta`` (``L'`` times the axial unit motion for the line tie) and the bones' forces
+        change at fixed u by ``df_c/dtheta``; with f the internal force (the face's reaction):
 
-            K_ff du_f = -(K L' g + df_c/dtheta)_f,
-            dPi*/dtheta = T L' + P,  P = dPi_c/dtheta|_u
-            d2Pi*/dtheta2 = g.K du L' + T L'' + df_c/dtheta . du + dP/dtheta|_u
+            K_ff du_f = -(K g + df_c/dtheta)_f,
+            dPi*/dtheta = f.g + P,  P = dPi_c/dtheta|_u                   (f.g = T L', line tie)
+            d2Pi*/dtheta2 = g.K du + f.g2 + df_c/dtheta . du + dP/dtheta|_u  (g2 = d2p/dtheta2)
 
         (the contact terms by central differences of the cheap contact energy and force in theta).
         """
@@ -312,33 +316,34 @@ class MuscleUnit:
         reuse = K is not None
         if K is None:
             self._set_path(theta_deg, theta_deg)
-            K, f = self.solver.tangent(u.ravel(), np.full(self.mesh.n_cells, activation))
-            tension = float(self._axial @ f)
-        L, dL, d2L = self.path.geometry(theta_deg)
+            K, force = self.solver.tangent(u.ravel(), np.full(self.mesh.n_cells, activation))
+        g, g2 = self.tie.motion(theta_deg, self.mesh.points)
         P, dP, rate = self._contact_rates(theta_deg, u)
-        S, du = self.solver.condensed_response(K, dL * self._axial, reuse_factorization=reuse, force_rate=rate)
-        work_slope = S + tension * d2L + dP + (0.0 if rate is None else float(rate @ du))
-        state = replace(self._scalars(theta_deg, activation, u, tension, contact_work=P),
+        S, du = self.solver.condensed_response(K, g, reuse_factorization=reuse, force_rate=rate)
+        work_slope = S + float(force @ g2) + dP + (0.0 if rate is None else float(rate @ du))
+        state = replace(self._scalars(theta_deg, activation, u, force, contact_work=P),
                         moment_slope=-float(work_slope), sensitivity=du.reshape(-1, 3))
         if reuse:  # a solver's solution: the caller takes max |J - 1| from it
             return state
         F = self.assembler.deformation_gradient(u.ravel())
         return replace(state, max_volume_change=float(np.abs(np.linalg.det(F) - 1).max()))
 
-    def _scalars(self, theta_deg: float, activation: float, u: np.ndarray, tension: float,
+    def _scalars(self, theta_deg: float, activation: float, u: np.ndarray, force: np.ndarray,
                  contact_work: float | None = None) -> MuscleState:
-        """A state with its exact moment (no slope yet): -(T L' + dPi_c/dtheta)."""
-        L, dL, _ = self.path.geometry(theta_deg)
+        """A state with its exact moment (no slope yet): -(f.g + dPi_c/dtheta), f.g = T L' on a line tie."""
+        L = self.length(theta_deg)
+        g, _ = self.tie.motion(theta_deg, self.mesh.points)
+        tension, work = self.tie.tension(force, theta_deg), float(force @ g)
         if contact_work is None:
             contact_work = self._contact_rates(theta_deg, u, slopes=False)[0]
-        force, depth = 0.0, 0.0
+        pressure, depth = 0.0, 0.0
         if self.contact is not None:
             x = self.mesh.points + u
             self.contact.obstacles = tuple(self.obstacles(theta_deg))
-            force = float(np.linalg.norm(self.contact.force(x).reshape(-1, 3), axis=1).sum())
+            pressure = float(np.linalg.norm(self.contact.force(x).reshape(-1, 3), axis=1).sum())
             depth = float(self.contact.penetration(x).max(initial=0.0))
-        return MuscleState(theta_deg, float(L), activation, u, float(tension), -float(tension * dL + contact_work),
-                           float("nan"), 0.0, contact_force=force, max_penetration=depth)
+        return MuscleState(theta_deg, float(L), activation, u, tension, -float(work + contact_work),
+                           float("nan"), 0.0, contact_force=pressure, max_penetration=depth)
 
     def _contact_rates(self, theta_deg: float, u: np.ndarray, slopes: bool = True):
         """P = dPi_c/dtheta|_u (N mm/rad), dP/dtheta|_u and df_c/dtheta|_u (n_dofs,) by central
@@ -359,9 +364,5 @@ class MuscleUnit:
             return P, 0.0, None
         return P, (energy[2] - 2 * energy[1] + energy[0]) / h**2, (force[1] - force[0]) / (2 * h)
 
-    def _tension(self, solution) -> float:
-        """T: the axial part of the insertion face's reaction."""
-        return float(self.direction @ solution.reactions["insertion"].force)
 
-
-__all__ = ["ConvergenceError", "MusclePath", "MuscleState", "MuscleUnit", "line_rotation"]
+__all__ = ["ConvergenceError", "MusclePath", "MuscleState", "MuscleUnit"]

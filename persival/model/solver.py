@@ -97,6 +97,8 @@ class StaticSolution:
     # upper-triangle tangent at ``displacement`` (None when no Newton step assembled one); the
     # solver's factorization is then of a tangent one Newton step away (condensed_response reuses it)
     tangent: sp.csr_matrix | None = None
+    # (n_dofs,) N: the internal force at ``displacement``; on the constrained DOFs, the reactions per DOF
+    internal_force: np.ndarray | None = None
 
 
 class QuasiStaticSolver:
@@ -536,6 +538,7 @@ class QuasiStaticSolver:
             hinge_angle_deg=theta,
             hinge_moment_residual=r_theta,
             tangent=tangent if self._factor_is_recent else None,
+            internal_force=f,
         )
 
     def _validated_activation(self, activation, name) -> np.ndarray:
