@@ -95,8 +95,11 @@ def register(app: typer.Typer) -> None:
                                    help="tables (from `persival tables`), direct (coupled continuation) or auto "
                                         "(tables when built)."),
         out: Path = typer.Option(Path("results/simulate"), "--out", help="Output directory (state.json + VTU)."),
+        angle: float | None = typer.Option(None, "--angle", help="Hold the elbow at this angle (deg; an isometric "
+                                           "state: each muscle's FE equilibrium there, a brace takes the joint's moment; "
+                                           "solved directly)."),
     ) -> None:
-        """Solve the FE arm for one activation vector; write state.json and VTU files."""
+        """Solve the FE arm for one activation vector (or hold it at --angle); write state.json and VTU files."""
         from rich.console import Console
 
         from persival.model.arm_file import load_model_file
@@ -106,12 +109,20 @@ def register(app: typer.Typer) -> None:
         alpha = parse_activations(activations)
         with user_errors():  # every input is checked before the meshing and solve
             alpha = check_activation_vector(alpha).tolist()
-            load_model_file(model)[0].profile(profile)
+            spec = load_model_file(model)[0]
+            spec.profile(profile)
+            lower, upper = spec.joint.limits_deg
+            if angle is not None and not lower <= angle <= upper:
+                raise ValueError(f"--angle must lie within the joint limits [{lower:g}, {upper:g}] deg, got {angle:g}")
             if method not in ("auto", "tables", "direct"):
                 raise ValueError(f"--method must be auto, tables or direct, got {method!r}")
             check_output_dir(out)
         with user_errors(out=out):
-            state, arm, path = _solve_one(console, model, profile, method, alpha)
+            if angle is None:
+                state, arm, path = _solve_one(console, model, profile, method, alpha)
+            else:
+                state, arm = _hold_one(console, model, profile, alpha, angle)
+                path = "held by a brace: the residual is its moment"
             from persival.model.output import write_state
 
             write_state(arm, state, out)
@@ -150,6 +161,23 @@ def _solve_one(console, model, profile: str, method: str, alpha):
             if table is not None:
                 return TableSolver(arm, table).solve(alpha, progress=report), arm, "tables"
             return arm.solve(alpha, progress=report), arm, "direct"
+        except ConvergenceError as exc:
+            typer.echo(f"error: the FE solve did not converge: {exc}; nothing was written", err=True)
+            raise typer.Exit(3) from None
+
+
+def _hold_one(console, model, profile: str, alpha, angle: float):
+    """(state, arm) of the arm held at ``angle``; a failed solve is a typer.Exit(3)."""
+    from persival.model.arm import ArmModel
+    from persival.model.progress import ConsoleProgress
+    from persival.model.solver import ConvergenceError
+
+    with console.status("meshing the arm (gmsh, cached after the first run)"):
+        arm = ArmModel(model, profile)
+    with console.status(f"activations {alpha} held at {angle:g} deg") as status, \
+            ConsoleProgress(console, status, f"activations {alpha}") as report:
+        try:
+            return arm.hold(alpha, angle, progress=report), arm
         except ConvergenceError as exc:
             typer.echo(f"error: the FE solve did not converge: {exc}; nothing was written", err=True)
             raise typer.Exit(3) from None

@@ -17,6 +17,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     def render(
         states: list[Path] = typer.Argument(..., help="State directories written by `persival simulate`."),
         out: Path = typer.Option(Path("results/arm.png"), "--out", help="PNG file to write."),
+        muscles: str | None = typer.Option(None, "--muscles", help="Comma-separated muscles to draw (default: all)."),
     ) -> None:
         """Render solved arm states side by side (off-screen pyvista), coloured by displacement."""
         from rich.console import Console
@@ -26,7 +27,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         console = Console()
         with user_errors(out=out):
             check_output_file(out)
-            path = render_states(states, out)
+            chosen = None if muscles is None else [m.strip() for m in muscles.split(",")]
+            path = render_states(states, out, muscles=chosen)
         console.print(f"wrote {path}")
 
     @app.command()

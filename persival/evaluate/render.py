@@ -146,18 +146,25 @@ def _shown_displacement(states, reference):
             for _, m, _ in states]
 
 
-def render_states(directories: list[str | Path], out: str | Path, window: tuple[int, int] = (560, 720)) -> Path:
+def render_states(directories: list[str | Path], out: str | Path, window: tuple[int, int] = (560, 720),
+                  muscles: list[str] | None = None) -> Path:
     """Render each state into its own panel, side by side, with one shared colour scale.
 
     ``window[1]`` is the height of a panel's 3D view in pixels (its width follows the arm's
-    extent); every panel shows the same box at the same scale.
+    extent); every panel shows the same box at the same scale. ``muscles``: draw only these
+    (default all; e.g. one muscle that the others hide in the side view).
     """
     headless_vtk()
     if not directories:
         raise ValueError("give at least one state directory")
+    unknown = sorted(set(muscles or ()) - set(MUSCLES))
+    if unknown or muscles == []:
+        raise ValueError(f"muscles to draw must be some of {list(MUSCLES)}, got {muscles}")
     states = [_load(Path(d)) for d in directories]
     reference = _reference(states)
     shown = _shown_displacement(states, reference)
+    if muscles:
+        states = [(summary, {n: m[n] for n in MUSCLES if n in muscles}, bones) for summary, m, bones in states]
     # framed to the muscles (the bones are cut at the frame): every panel has the same height
     # and scale, and its own width
     boxes = [np.array([[p[:, 1].min(), p[:, 2].min()], [p[:, 1].max(), p[:, 2].max()]])
@@ -165,7 +172,7 @@ def render_states(directories: list[str | Path], out: str | Path, window: tuple[
     zlo, zhi = min(b[0, 1] for b in boxes), max(b[1, 1] for b in boxes)
     pad = 0.04 * (zhi - zlo)
     frames = [np.array([[b[0, 0] - pad, zlo - pad], [b[1, 0] + pad, zhi + pad]]) for b in boxes]
-    top = max(1e-9, max(float(v.max()) for s in shown for v in s.values()))
+    top = max(1e-9, max(float(values[n].max()) for values, (_, drawn, _) in zip(shown, states) for n in drawn))
     images = []
     for (_, muscles, bones), values, frame in zip(states, shown, frames):
         images.append(_draw(muscles, bones, values, (0.0, top), *_camera(frame, window[1])))
@@ -199,6 +206,8 @@ def _compose(states, images, frames, reference, top, out: Path) -> Path:
         ax.set_axis_off()
         alpha = ", ".join(f"{v:.2g}" for v in summary["activations"].values())
         note = " (reference)" if k == reference else ""
+        if "held_at_deg" in summary.get("newton", {}):
+            note += f", held (brace {summary['newton']['brace_moment_Nmm']:.0f} N mm)"
         ax.set_title(f"alpha = ({alpha})\nelbow {summary['elbow_angle_deg']:.1f} deg{note}", fontsize=fontsize)
         if k == 0:
             _label_muscles(ax, muscles, frame, fontsize - 1)

@@ -234,12 +234,48 @@ class ArmModel(ArmBody):
         start = warm_start if warm_start is not None else self.base_state(progress)
         if warm_start is None and not np.any(target):
             return start  # the hanging arm itself (its statistics are those of its solve)
+        state = self._with_retries(target, lambda: self._equilibrium(target, start.muscle_states, start.elbow_angle_deg,
+                                                                     SolveTracker(progress)))
+        state.wall_time_s = time.perf_counter() - t0
+        return state
+
+    def hold(self, activations, angle_deg: float, warm_start: ArmState | None = None, progress=None) -> ArmState:
+        """The arm held at ``angle_deg`` by a brace (an isometric state, as on a dynamometer): every
+        muscle in its own equilibrium at that angle (SPEC 3.3), continued from its rest state
+        (or from ``warm_start``'s muscles). The joint is not balanced: ``moment_residual`` is
+        g(theta) = -sum M_m - M_ext, the moment the brace exerts on the forearm (flexion positive;
+        also ``statistics["brace_moment_Nmm"]``). Same retry ladder as :meth:`solve`.
+        """
+        target = check_activation_vector(activations)
+        lower, upper = self.spec.joint.limits_deg
+        if not (np.isfinite(angle_deg) and lower <= angle_deg <= upper):
+            raise ValueError(f"the held elbow angle must lie within the joint limits [{lower:g}, {upper:g}] deg, "
+                             f"got {angle_deg}")
+        t0 = time.perf_counter()
+        start = warm_start.muscle_states if warm_start is not None else self.rest_states(SolveTracker(progress, "rest state"))
+
+        def held() -> ArmState:
+            stats: dict = {"joint_iterations": 0, "iterations": 0}
+            tracker = SolveTracker(progress, f"held at {angle_deg:g} deg")
+            tracker.joint(0, angle_deg)
+            g, dg, states = self.moment_balance(float(angle_deg), target, start, stats, tracker)
+            state = self._arm_state(target, float(angle_deg), g, dg, states, stats)
+            state.statistics.update(held_at_deg=float(angle_deg), brace_moment_Nmm=float(g))
+            return state
+
+        state = self._with_retries(target, held)
+        state.wall_time_s = time.perf_counter() - t0
+        return state
+
+    def _with_retries(self, target, attempt):
+        """``attempt()`` with the first activation step of ``retry_steps``, in turn, until one
+        converges; every reason in the ConvergenceError otherwise. ``statistics["tries"]`` counts them."""
         options, reasons = self.options, []
         try:
             for scale in self.retry_steps:
                 self.set_options(replace(options, initial_step=options.initial_step * scale))
                 try:
-                    state = self._equilibrium(target, start.muscle_states, start.elbow_angle_deg, SolveTracker(progress))
+                    state = attempt()
                     break
                 except ConvergenceError as exc:
                     reasons.append(f"first step {options.initial_step * scale:g}: {exc}")
@@ -248,7 +284,6 @@ class ArmModel(ArmBody):
         finally:
             self.set_options(options)
         state.statistics["tries"] = len(reasons) + 1
-        state.wall_time_s = time.perf_counter() - t0
         return state
 
     # -- the joint equilibrium ----------------------------------------------------------------------
@@ -322,6 +357,10 @@ class ArmModel(ArmBody):
             stats["joint_iterations"] += 1
         else:
             raise ConvergenceError(f"joint equilibrium not found: moment residual {g:.3e} N mm at {theta:.2f} deg")
+        return self._arm_state(target, theta, g, dg, states, stats)
+
+    def _arm_state(self, target, theta: float, g: float, dg: float, states: dict[str, MuscleState], stats: dict) -> ArmState:
+        """The ArmState of muscle states at theta, with the joint's residual g and stiffness dg."""
         moments = {name: s.moment for name, s in states.items()}
         forces = {name: s.tension for name, s in states.items()}
         stats["max_penetration_mm"] = max(s.max_penetration for s in states.values())

@@ -275,10 +275,12 @@ class MuscleUnit:
             return self._state(theta_deg, activation, solution)
         finally:
             self.solver.options = options
-        if detour and activation != start.activation and start.angle_deg != self.mesh_angle_deg:
+        if detour and activation != start.activation and not start.angle_deg == self.mesh_angle_deg == theta_deg:
             # Activating a slack, bowed muscle at fixed ends can snap through (the bow pulls
             # straight), where load stepping stalls. The same state is reached without a limit
-            # point from the straight mesh pose: activate there first, then change the angle.
+            # point from the straight mesh pose: activate there first, then change the angle
+            # (also from the mesh pose itself: changing angle and activation together can stall
+            # where the staged path does not, e.g. a biceps pressed onto the humerus).
             # A fallback, not a guarantee (on the coarse mesh isometric activation at the mesh
             # pose itself stalls for the biceps and the brachioradialis): if it fails too, the
             # error reports the direct path.
