@@ -39,6 +39,10 @@ def test_default_model_loads_with_five_muscles():
         ("insertion = [0.0, -18.0, 16.0]", "insertion = [0.0, -10.0, 10.0]", "inside its wrap cylinder"),
         ('insertion = [2.0, -2.0, -45.0]\nwrap_radius = 7.0', 'insertion = [2.0, -2.0, -45.0]\nwrap_cable = 10.0',
          "wrap_cable needs a wrap_radius"),
+        ('insertion = [2.0, -2.0, -45.0]\nwrap_radius = 7.0', 'insertion = [2.0, -2.0, -45.0]\nwrap_radius = 7.0\n'
+         'insertion_tie = "forearm"', "forearm-tied insertion face"),
+        ('insertion = [2.0, -2.0, -45.0]\nwrap_radius = 7.0', 'insertion = [2.0, -2.0, -45.0]\ninsertion_tie = "bone"',
+         "insertion_tie"),
     ],
 )
 def test_bad_model_files_are_refused(tmp_path, old, new, message):
@@ -113,3 +117,14 @@ def test_simulate_command_refuses_bad_input_before_meshing(tmp_path):
     result = runner.invoke(app, ["simulate", "-a", "0.5,0,0,0,0", "--model", str(bad), "--out", str(out)])
     assert result.exit_code == 2 and "not valid TOML" in result.output
     assert not out.exists()  # nothing written
+
+
+def test_biceps_on_humerus_variant_loads():
+    """The shipped variant: the default but for the biceps (humerus contact, forearm tie, meshed at 120 deg)."""
+    variant = default_model_path().parent / "variants" / "biceps_on_humerus.toml"
+    spec, _ = load_model_file(variant)
+    default, _ = load_model_file(None)
+    biceps = {m.name: m for m in spec.ordered_muscles()}["biceps"]
+    assert biceps.wraps == ["humerus"] and biceps.insertion_tie == "forearm" and biceps.mesh_angle_deg == 120.0
+    assert [m for m in spec.ordered_muscles() if m.name != "biceps"] == [m for m in default.ordered_muscles()
+                                                                         if m.name != "biceps"]

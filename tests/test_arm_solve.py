@@ -158,6 +158,35 @@ def test_state_files_and_render(arm, states, tmp_path):
         render_states([tmp_path], tmp_path / "x.png")
 
 
+def test_held_arm_carries_the_joint_residual_and_draws(arm, states, tmp_path):
+    """The arm held 2 deg past the biceps-0.5 equilibrium (an isometric state): every muscle in
+    its own equilibrium there, and the brace's moment is the joint residual g, close to the joint
+    stiffness times the offset; the state draws with a held title, one muscle, and in section."""
+    pytest.importorskip("pyvista")
+    from persival.evaluate.render import render_states
+    from persival.evaluate.sections import _outline, render_sections
+    from persival.model.output import write_state
+
+    half, offset = states[1], 2.0
+    held = arm.hold(half.activations, half.elbow_angle_deg + offset, warm_start=half)
+    stiffness = half.statistics["joint_stiffness_Nmm_per_rad"]
+    assert held.elbow_angle_deg == half.elbow_angle_deg + offset
+    assert held.statistics["brace_moment_Nmm"] == held.moment_residual
+    assert held.moment_residual == pytest.approx(stiffness * np.radians(offset), rel=0.1)
+    assert sum(held.muscle_moments.values()) + held.external_moment + held.moment_residual == pytest.approx(0.0, abs=1e-6)
+    with pytest.raises(ValueError, match="joint limits"):
+        arm.hold(half.activations, 200.0, warm_start=half)
+    dirs = [write_state(arm, s, tmp_path / name) for name, s in (("half", half), ("held", held))]
+    assert json.loads((dirs[1] / "state.json").read_text())["newton"]["held_at_deg"] == held.elbow_angle_deg
+    assert render_states(dirs, tmp_path / "biceps.png", window=(200, 260), muscles=["biceps"]).is_file()
+    import pyvista as pv
+
+    biceps = pv.read(dirs[1] / "biceps.vtu").extract_surface(algorithm="dataset_surface")
+    ring = _outline(biceps, 150.0)  # a closed outline across the belly
+    assert len(ring) > 10 and np.ptp(ring[:, :, 1]) > 20.0
+    assert render_sections(dirs, [100.0, 150.0], tmp_path / "sections.png", ["biceps", "brachialis"]).is_file()
+
+
 def test_render_without_a_display_is_quiet(arm, states, tmp_path):
     """Off-screen VTK without DISPLAY: no "bad X server connection" (nor any other) warning."""
     import os

@@ -32,6 +32,29 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         console.print(f"wrote {path}")
 
     @app.command()
+    def sections(
+        states: list[Path] = typer.Argument(..., help="State directories written by `persival simulate`."),
+        heights: str = typer.Option("100,150,200,250", "--heights", help="Comma-separated heights along the humerus (mm)."),
+        muscles: str | None = typer.Option(None, "--muscles", help="Comma-separated muscles to draw (default: all)."),
+        out: Path = typer.Option(Path("results/sections.png"), "--out", help="PNG file to write."),
+    ) -> None:
+        """Transverse sections of solved arm states: muscle and bone outlines across the upper arm."""
+        from rich.console import Console
+
+        from persival.evaluate.sections import render_sections
+
+        console = Console()
+        with user_errors(out=out):
+            check_output_file(out)
+            try:
+                levels = [float(h) for h in heights.split(",")]
+            except ValueError:
+                raise ValueError(f"--heights expects comma-separated numbers (mm), got {heights!r}") from None
+            chosen = None if muscles is None else [m.strip() for m in muscles.split(",")]
+            path = render_sections(states, levels, out, chosen)
+        console.print(f"wrote {path}")
+
+    @app.command()
     def curves(
         model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
         profile: str = typer.Option("quick", "--profile", help=profiles_help()),

@@ -1,0 +1,79 @@
+"""Transverse sections of solved arm states: where muscles meet bones, seen along the humerus.
+
+A side view cannot tell a belly lying on a bone from one passing through it; a section across
+the upper arm can. Each state directory (``persival simulate``) becomes a panel with the
+outlines of the chosen muscles' surfaces and of the bones cut by the planes z = const
+(upper-arm frame: humerus along +z, anterior +y, hinge axis +x), one colour per height.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from persival.evaluate.render import BONE_COLOUR, headless_vtk, read_state_dir
+from persival.vocabulary import MUSCLES
+
+__all__ = ["render_sections"]
+
+
+def _outline(surface, z: float) -> np.ndarray:
+    """Segments (n, 2, 2) in the (y, x) plane where ``surface`` (pyvista PolyData) crosses z."""
+    cut = surface.slice(normal="z", origin=(0.0, 0.0, z))
+    if cut.n_points == 0:
+        return np.zeros((0, 2, 2))
+    lines = np.asarray(cut.lines).reshape(-1, 3)[:, 1:]  # [2, i, j] per segment
+    points = np.asarray(cut.points)[:, [1, 0]]
+    return points[lines]
+
+
+def render_sections(directories: list[str | Path], heights_mm: list[float], out: str | Path,
+                    muscles: list[str] | None = None) -> Path:
+    """One panel per state: outlines of ``muscles`` (default all) and the bones at each height."""
+    headless_vtk()
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pyvista as pv
+    from matplotlib.collections import LineCollection
+
+    if not directories:
+        raise ValueError("give at least one state directory")
+    if not heights_mm or not all(np.isfinite(heights_mm)):
+        raise ValueError(f"give one or more finite heights (mm along the humerus), got {heights_mm}")
+    chosen = list(MUSCLES) if muscles is None else list(muscles)
+    unknown = sorted(set(chosen) - set(MUSCLES))
+    if unknown or not chosen:
+        raise ValueError(f"muscles to draw must be some of {list(MUSCLES)}, got {muscles}")
+    fig, axes = plt.subplots(1, len(directories), figsize=(4.2 * len(directories), 3.4), layout="constrained",
+                             squeeze=False)
+    for ax, directory in zip(axes[0], directories):
+        directory = Path(directory)
+        summary = read_state_dir(directory)
+        bones = [pv.read(p) for p in sorted(directory.glob("bone_*.vtu"))]
+        surfaces = [pv.read(directory / f"{name}.vtu").extract_surface(algorithm="dataset_surface") for name in chosen]
+        for k, z in enumerate(heights_mm):
+            colour = f"C{k}"
+            for bone in bones:
+                segments = _outline(bone.extract_surface(algorithm="dataset_surface"), z)
+                ax.add_collection(LineCollection(segments, colors=BONE_COLOUR, linewidths=3.0))
+            for surface in surfaces:
+                segments = _outline(surface, z)
+                ax.add_collection(LineCollection(segments, colors=colour, linewidths=1.2,
+                                                 label=f"z = {z:g} mm" if len(segments) else None))
+        ax.autoscale()
+        ax.set_aspect("equal")
+        ax.set_xlabel("y (mm, anterior)")
+        ax.set_ylabel("x (mm, lateral)")
+        held = " (held)" if "held_at_deg" in summary.get("newton", {}) else ""
+        ax.set_title(f"{summary.get('model', '')}\nelbow {summary['elbow_angle_deg']:.1f} deg{held}", fontsize=8)
+        ax.legend(fontsize=7, loc="best")
+    fig.suptitle(f"sections across the upper arm: {', '.join(chosen)} (colours by height) and bones (grey)",
+                 fontsize=9)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
