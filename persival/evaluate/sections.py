@@ -3,7 +3,8 @@
 A side view cannot tell a belly lying on a bone from one passing through it; a section across
 the upper arm can. Each state directory (``persival simulate``) becomes a panel with the
 outlines of the chosen muscles' surfaces and of the bones cut by the planes z = const
-(upper-arm frame: humerus along +z, anterior +y, hinge axis +x), one colour per height.
+(upper-arm frame: humerus along +z, anterior +y, hinge axis +x), one colour per height and
+one line style per muscle.
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ from persival.evaluate.render import BONE_COLOUR, headless_vtk, read_state_dir
 from persival.vocabulary import MUSCLES
 
 __all__ = ["render_sections"]
+
+STYLES = ("-", "--", ":", "-.", (0, (5, 1, 1, 1)))  # one per muscle, in vocabulary order
 
 
 def _outline(surface, z: float) -> np.ndarray:
@@ -38,6 +41,7 @@ def render_sections(directories: list[str | Path], heights_mm: list[float], out:
     import matplotlib.pyplot as plt
     import pyvista as pv
     from matplotlib.collections import LineCollection
+    from matplotlib.lines import Line2D
 
     if not directories:
         raise ValueError("give at least one state directory")
@@ -47,7 +51,7 @@ def render_sections(directories: list[str | Path], heights_mm: list[float], out:
     unknown = sorted(set(chosen) - set(MUSCLES))
     if unknown or not chosen:
         raise ValueError(f"muscles to draw must be some of {list(MUSCLES)}, got {muscles}")
-    fig, axes = plt.subplots(1, len(directories), figsize=(4.2 * len(directories), 3.4), layout="constrained",
+    fig, axes = plt.subplots(1, len(directories), figsize=(5.4 * len(directories), 3.0), layout="constrained",
                              squeeze=False)
     for ax, directory in zip(axes[0], directories):
         directory = Path(directory)
@@ -59,19 +63,20 @@ def render_sections(directories: list[str | Path], heights_mm: list[float], out:
             for bone in bones:
                 segments = _outline(bone.extract_surface(algorithm="dataset_surface"), z)
                 ax.add_collection(LineCollection(segments, colors=BONE_COLOUR, linewidths=3.0))
-            for surface in surfaces:
-                segments = _outline(surface, z)
-                ax.add_collection(LineCollection(segments, colors=colour, linewidths=1.2,
-                                                 label=f"z = {z:g} mm" if len(segments) else None))
+            for surface, style in zip(surfaces, STYLES):
+                ax.add_collection(LineCollection(_outline(surface, z), colors=colour, linewidths=1.2, linestyles=style))
         ax.autoscale()
         ax.set_aspect("equal")
         ax.set_xlabel("y (mm, anterior)")
         ax.set_ylabel("x (mm, lateral)")
         held = " (held)" if "held_at_deg" in summary.get("newton", {}) else ""
         ax.set_title(f"{summary.get('model', '')}\nelbow {summary['elbow_angle_deg']:.1f} deg{held}", fontsize=8)
-        ax.legend(fontsize=7, loc="best")
-    fig.suptitle(f"sections across the upper arm: {', '.join(chosen)} (colours by height) and bones (grey)",
-                 fontsize=9)
+        keys = [Line2D([], [], color=f"C{k}", label=f"z = {z:g} mm") for k, z in enumerate(heights_mm)]
+        if len(chosen) > 1:
+            keys += [Line2D([], [], color="0.2", linestyle=style, label=name) for name, style in zip(chosen, STYLES)]
+        keys.append(Line2D([], [], color=BONE_COLOUR, linewidth=3.0, label="bones"))
+        ax.legend(handles=keys, fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    fig.suptitle(f"sections across the upper arm ({', '.join(chosen)})", fontsize=9)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
