@@ -12,58 +12,28 @@ mortar contact does). The hanging arm is kept in the state cache.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from persival.model.arm_body import ArmBody, muscle_profile, rotation_about
+from persival.model.arm_cache import ArmStateCache
 from persival.model.arm_file import Muscle
+from persival.model.arm_state import ArmState
 from persival.model.assembly import MaterialField
-from persival.model.constraints import Hinge
 from persival.model.contact import bone_obstacles
 from persival.model.mesh import Tet10Mesh
 from persival.model.muscle_state import MusclePath, MuscleState
 from persival.model.muscle_unit import MuscleUnit
 from persival.model.progress import SolveTracker
-from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
-from persival.model.state_cache import load_states, model_cache_dir, save_states
-from persival.vocabulary import MUSCLES, check_activation_vector
+from persival.model.solver import ConvergenceError, SolverOptions
+from persival.vocabulary import check_activation_vector
 
 __all__ = ["ArmModel", "ArmState", "muscle_profile", "rotation_about"]
 
 
-@dataclass
-class ArmState:
-    """One equilibrium of the arm (also the warm-start token for nearby solves)."""
-
-    activations: np.ndarray  # (5,) biceps, brachialis, brachioradialis, triceps, anconeus
-    elbow_angle_deg: float
-    displacement: np.ndarray  # (n_nodes, 3) mm, all muscles, world frame
-    moment_residual: float  # N mm at convergence
-    muscle_moments: dict[str, float]  # N mm about the hinge axis (flexion positive)
-    muscle_forces: dict[str, float]  # N, tension of each muscle (negative: pushing, slack)
-    external_moment: float  # N mm, gravity + passive joint
-    max_volume_change: float
-    muscle_states: dict[str, MuscleState] = field(default_factory=dict, repr=False)
-    statistics: dict = field(default_factory=dict)
-    wall_time_s: float = 0.0
-
-    def summary(self) -> dict:
-        return {
-            "activations": {n: float(a) for n, a in zip(MUSCLES, self.activations)},
-            "elbow_angle_deg": self.elbow_angle_deg,
-            "moment_residual_Nmm": self.moment_residual,
-            "muscle_moments_Nmm": self.muscle_moments,
-            "muscle_forces_N": self.muscle_forces,
-            "external_moment_Nmm": self.external_moment,
-            "max_abs_J_minus_1": self.max_volume_change,
-            "newton": self.statistics,
-            "wall_time_s": self.wall_time_s,
-        }
-
-
-class ArmModel(ArmBody):
+class ArmModel(ArmStateCache, ArmBody):
     """The FE upper limb: ``solve(activations) -> ArmState`` (SPEC 3.3).
 
     Meshing happens once at construction. Every muscle is its own FE problem
@@ -145,70 +115,6 @@ class ArmModel(ArmBody):
             state.wall_time_s = time.perf_counter() - t0
             self._base = state
         return self._base
-
-    def rest_states(self, tracker: SolveTracker | None = None, cache: bool = True) -> dict[str, MuscleState]:
-        """Every muscle's passive equilibrium at its mesh length (the prestretch switched on,
-        SPEC 3.3): the units' own when they have them, else from the state cache when there, else
-        solved (20 s on the quick mesh) and, with ``cache``, written there without a hanging arm yet."""
-        in_memory = all(getattr(unit, "_rest", None) is not None for unit in self.units.values())
-        if not in_memory and not (cache and self.load_cached_rest_states()):
-            tracker = tracker or SolveTracker(None, "rest state")
-            rest = {name: unit.rest_state(tracker.muscle(name)) for name, unit in self.units.items()}
-            if cache:
-                save_states(self.cache_dir() / "rest_state.npz",
-                            {"groups": ["rest"], "model_hash": self.model_hash, "profile": self.profile}, {"rest": rest})
-        return {name: unit.rest_state() for name, unit in self.units.items()}
-
-    def adopt_base_state(self, state: ArmState, cache: bool = True) -> None:
-        """Take ``state`` (activations 0, a converged FE equilibrium) as the hanging arm, and
-        with ``cache`` keep it in the state cache beside the rest states."""
-        if np.any(state.activations):
-            raise ValueError(f"the hanging arm has activations 0, not {list(state.activations)}")
-        self._base = state
-        if cache:
-            self._save_cache(state)
-
-    def has_cached_base(self) -> bool:
-        """Whether the state cache holds this model's hanging arm (not only its rest states)."""
-        return self._cached_base() is not None
-
-    def _save_cache(self, hanging: ArmState) -> None:
-        rest = self.rest_states()
-        save_states(self.cache_dir() / "rest_state.npz",
-                    {"groups": ["rest", "hanging"], "elbow_angle_deg": hanging.elbow_angle_deg,
-                     "model_hash": self.model_hash, "profile": self.profile},
-                    {"rest": rest, "hanging": hanging.muscle_states})
-
-    def cache_dir(self) -> Path:
-        """This model's and mesh's folder of the state cache (persival.model.state_cache)."""
-        return model_cache_dir(self)
-
-    def load_cached_rest_states(self) -> bool:
-        """Give every muscle its rest state from the state cache, if there; True if it was."""
-        loaded = self._cached_groups()
-        if loaded is not None:
-            self._set_rest_states(loaded[1]["rest"])
-        return loaded is not None
-
-    def _set_rest_states(self, rest: dict[str, MuscleState]) -> None:
-        for name, unit in self.units.items():
-            unit._rest = rest[name]
-
-    def _cached_groups(self):
-        """(header, {group: {muscle: state}}) of this model's cache file, or None."""
-        loaded = load_states(self.cache_dir() / "rest_state.npz", list(self.units))
-        if loaded is None or loaded[0].get("model_hash") != self.model_hash or "rest" not in loaded[1]:
-            return None
-        return loaded
-
-    def _cached_base(self):
-        loaded = self._cached_groups()
-        if loaded is None or "hanging" not in loaded[1]:
-            return None
-        header, groups = loaded
-        # moment NaN: the states are re-converged (checked) by Newton, not taken as solved
-        hanging = {name: replace(s, moment=float("nan")) for name, s in groups["hanging"].items()}
-        return groups["rest"], hanging, float(header["elbow_angle_deg"])
 
     def equilibrium_from(self, activations, start: dict[str, MuscleState], angle_deg: float, progress=None) -> ArmState:
         """Joint equilibrium for ``activations`` continued from given muscle states near
@@ -393,43 +299,9 @@ class ArmModel(ArmBody):
         return u
 
     def verify_equilibrium(self, state: ArmState) -> tuple[float, float]:
-        """Check a state in the monolithic formulation, independently of the muscle units:
-        every muscle's faces tied to the elbow (ball joints on the lines of action,
-        :class:`Hinge`), the whole mesh assembled at once. Returns the largest nodal force
-        residual of the free DOFs (N) and the hinge's moment residual from virtual work,
-        f . dx/dtheta - M_ext (N mm). Only for line-tied muscles without bones (the monolithic
-        form has neither contact terms nor forearm ties)."""
-        nodes, reference, O, I, is_insertion, counts = [], [], [], [], [], []
-        muscles = self.spec.ordered_muscles()
-        other = [m.name for m in muscles if m.wraps or m.insertion_tie != "line"]
-        if other:
-            raise ValueError(f"verify_equilibrium checks line-tied muscles without bones; {other} have bones or "
-                             "forearm ties (their own checks: tests/test_contact.py)")
-        for m in muscles:
-            insertion_ref = self.body_end(m, m.mesh_angle_deg)
-            for end in ("origin", "insertion"):
-                ids = self.mesh.node_sets[f"{m.name}/{end}"]
-                nodes.append(ids)
-                counts.append(len(ids))
-                reference.append(np.full(len(ids), m.mesh_angle_deg))
-                O.append(np.tile(m.origin, (len(ids), 1)))
-                I.append(np.tile(insertion_ref, (len(ids), 1)))
-                is_insertion.append(np.full(len(ids), end == "insertion"))
-        # the body ends (a wrapped path's end slides along its first segment, SPEC 3.3)
-        repeats = np.array(counts)
-        line_ends = lambda theta: np.repeat(np.repeat([self.body_end(m, theta) for m in muscles], 2, axis=0),  # noqa: E731
-                                            repeats, axis=0)
-        elbow = Hinge(
-            "elbow", np.concatenate(nodes), self.centre, self.axis, np.concatenate(reference), start_deg=state.elbow_angle_deg,
-            free=True, external_moment=self.external_moment,
-            muscle_lines=(np.vstack(O), np.vstack(I), np.concatenate(is_insertion)), line_ends=line_ends,
-        )
-        solver = QuasiStaticSolver(self.mesh, self.material, [elbow], self.options)
-        activation = self.cell_activation(state.activations)
-        u = state.displacement.ravel()
-        f = solver.assembler.internal_force(u, self.material, activation)
-        moment, _ = solver.hinge_balance(u, state.elbow_angle_deg, activation)
-        return float(np.abs(f[solver.free]).max()), float(moment)
+        """The state's residuals in the monolithic formulation (persival.model.monolithic)."""
+        from persival.model.monolithic import verify_equilibrium
 
+        return verify_equilibrium(self, state)
 
 __all__ = ["ArmModel", "ArmState", "ConvergenceError", "muscle_profile", "rotation_about"]
