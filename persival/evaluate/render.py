@@ -179,6 +179,17 @@ def render_states(directories: list[str | Path], out: str | Path, window: tuple[
     return _compose(states, images, frames, reference, top, Path(out))
 
 
+def _title(summary: dict, is_reference: bool, with_model: bool) -> str:
+    """A panel's title: the model where the panels differ in it, the activations, the angle, and
+    for a held state (``persival simulate --angle``) the brace's moment."""
+    alpha = ", ".join(f"{v:.2g}" for v in summary["activations"].values())
+    lines = [summary.get("model", "")] if with_model else []
+    lines += [f"alpha = ({alpha})", f"elbow {summary['elbow_angle_deg']:.1f} deg{' (reference)' if is_reference else ''}"]
+    if "held_at_deg" in summary.get("newton", {}):
+        lines.append(f"held: brace {summary['newton']['brace_moment_Nmm']:.0f} N mm")
+    return "\n".join(lines)
+
+
 def _compose(states, images, frames, reference, top, out: Path) -> Path:
     import matplotlib
 
@@ -191,24 +202,23 @@ def _compose(states, images, frames, reference, top, out: Path) -> Path:
     scale = height_px / (frames[0][1, 1] - frames[0][0, 1])  # pixels per mm, the same in every panel
     # text scaled with the panels, and panels at least as wide as their titles (small pictures)
     fontsize = float(np.clip(9.0 * height_px / 600.0, 6.5, 9.0))
-    least = 25 * 0.6 * fontsize * dpi / 72.0 / scale
+    titles = [_title(summary, k == reference, len({s.get("model") for s, _, _ in states}) > 1)
+              for k, (summary, _, _) in enumerate(states)]
+    longest = max(len(line) for title in titles for line in title.split("\n"))
+    least = (longest + 2) * 0.6 * fontsize * dpi / 72.0 / scale
     spans = [max(f[1, 0] - f[0, 0], least) for f in frames]
     margin = 0.3 * max(spans)  # room for the muscle labels either side of the first panel
     widths = [spans[0] + 2 * margin, *spans[1:], 0.04 * sum(spans)]
     fig, axes = plt.subplots(1, len(states) + 1, figsize=(scale * sum(widths) / dpi + 1.2, images[0].shape[0] / dpi + 0.9),
                              gridspec_kw={"width_ratios": widths}, layout="constrained")
-    for k, (ax, (summary, muscles, _), image, frame) in enumerate(zip(axes, states, images, frames)):
+    for k, (ax, (_, muscles, _), image, frame, title) in enumerate(zip(axes, states, images, frames, titles)):
         (ylo, zlo), (yhi, zhi) = frame
         ax.imshow(image, extent=(ylo, yhi, zlo, zhi), interpolation="antialiased")
         half = 0.5 * widths[k]
         ax.set_xlim(0.5 * (ylo + yhi) - half, 0.5 * (ylo + yhi) + half)
         ax.set_ylim(zlo, zhi)
         ax.set_axis_off()
-        alpha = ", ".join(f"{v:.2g}" for v in summary["activations"].values())
-        note = " (reference)" if k == reference else ""
-        if "held_at_deg" in summary.get("newton", {}):
-            note += f", held (brace {summary['newton']['brace_moment_Nmm']:.0f} N mm)"
-        ax.set_title(f"alpha = ({alpha})\nelbow {summary['elbow_angle_deg']:.1f} deg{note}", fontsize=fontsize)
+        ax.set_title(title, fontsize=fontsize)
         if k == 0:
             _label_muscles(ax, muscles, frame, fontsize - 1)
     origin = "the hanging arm (alpha = 0)" if reference is not None else "the muscles' mesh poses"
