@@ -353,3 +353,36 @@ def test_forearm_tied_unit_moment_is_the_face_reaction_about_the_hinge(with_bone
         print(f"largest du errors {np.round(error[near], 4)} mm/rad, nodes {np.round(np.linalg.norm(x[near, 1:], axis=1), 2)} "
               f"mm from the bone's axis; max |du| {np.abs(du).max():.3f}")
     assert error.max() < (5e-3 if with_bone else 2e-3) * np.abs(du).max()
+
+
+def test_variant_biceps_lies_on_the_humerus_at_150_deg(capsys):
+    """The shipped variant (persival/model/variants/biceps_on_humerus.toml, coarse mesh): its fully
+    active biceps, tied to the forearm and pressed on the humerus, at 150 deg stays outside the
+    bone within the penalty's 0.5 mm, within SPEC 3.3's |J - 1| < 1 %, and still flexes; the
+    default's straight biceps (no contact) passes far into the bone there."""
+    from persival.model.arm import ArmModel
+    from persival.model.defaults import default_model_path
+
+    def deepest_in_humerus(points):
+        inside = (points[:, 2] > 12.0) & (points[:, 2] < 300.0)
+        return 10.0 - np.hypot(points[inside, 0], points[inside, 1]).min()
+
+    variant = ArmModel(default_model_path().parent / "variants" / "biceps_on_humerus.toml", profile="coarse")
+    unit = variant.units["biceps"]
+    state = unit.solve(150.0, 1.0)
+    depth = deepest_in_humerus(unit.positions(state))
+    with capsys.disabled():
+        print(f"\nvariant biceps at 150 deg: moment {state.moment:.0f} N mm, tension {state.tension:.1f} N, contact "
+              f"{state.contact_force:.1f} N, deepest node {depth:.3f} mm in the humerus, max |J-1| "
+              f"{state.max_volume_change:.4f}")
+    assert state.contact_force > 20.0 and state.moment > 1000.0
+    assert depth < 0.5 and state.max_penetration < 0.5
+    assert state.max_volume_change < 0.01
+    default = ArmModel(profile="coarse")
+    straight = default.units["biceps"]
+    rest = straight.rest_state()
+    active = straight.solve(150.0, 1.0, rest)
+    at_mesh_pose, at_150 = (deepest_in_humerus(straight.positions(s)) for s in (rest, active))
+    with capsys.disabled():
+        print(f"default biceps: {at_mesh_pose:.2f} mm into the humerus at its mesh pose, {at_150:.2f} mm at 150 deg")
+    assert at_150 > 5.0 and at_150 > at_mesh_pose + 3.0
