@@ -211,3 +211,26 @@ def test_internal_errors_are_one_line_unless_debug():
     assert len(result.stderr.splitlines()) == 1 and "--debug" in result.stderr
     result = CliRunner().invoke(demo, ["--debug", "boom"])
     assert isinstance(result.exception, RuntimeError)  # re-raised: typer prints its traceback
+
+
+def test_a_hanging_arm_that_does_not_converge_is_a_clean_error(tmp_path, monkeypatch):
+    """A model whose hanging arm has no FE equilibrium within the retries (e.g. a variant meant for
+    flexed poses) ends `persival simulate` with one error line and exit 3, nothing written."""
+    import persival.model.arm as arm_module
+    from persival.model.solver import ConvergenceError
+
+    class StallingArm:
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def base_state(self, progress=None):
+            raise ConvergenceError("muscle 'biceps' from 120.0 deg, activation 0.00 to 20.0 deg, 0.00: stalled")
+
+    monkeypatch.setattr(arm_module, "ArmModel", StallingArm)
+    monkeypatch.chdir(tmp_path)
+    result = CliRunner().invoke(app, ["simulate", "-a", "0,0,0,0,0", "--out", "new"])
+    stderr = result.stderr.strip()
+    assert result.exit_code == 3, result.output
+    assert len(stderr.splitlines()) == 1 and stderr.startswith("error: the hanging arm"), stderr
+    assert "stalled" in stderr and "Traceback" not in result.output
+    assert not list(tmp_path.iterdir())

@@ -146,7 +146,11 @@ def _solve_one(console, model, profile: str, method: str, alpha):
         arm = ArmModel(model, profile)
     with console.status("the hanging arm (activations 0)") as status, \
             ConsoleProgress(console, status, "the hanging arm") as report:
-        arm.base_state(progress=report)  # with its progress shown; the table solve reads it
+        try:
+            arm.base_state(progress=report)  # with its progress shown; the table solve reads it
+        except ConvergenceError as exc:
+            typer.echo(f"error: the hanging arm (activations 0) did not converge: {exc}; nothing was written", err=True)
+            raise typer.Exit(3) from None
     table = None
     if method != "direct":
         try:
