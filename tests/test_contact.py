@@ -358,8 +358,8 @@ def test_forearm_tied_unit_moment_is_the_face_reaction_about_the_hinge(with_bone
 def test_variant_biceps_lies_on_the_humerus_at_150_deg(capsys):
     """The shipped variant (persival/model/variants/biceps_on_humerus.toml, coarse mesh): its fully
     active biceps, tied to the forearm and pressed on the humerus, at 150 deg stays outside the
-    bone within the penalty's 0.5 mm, within SPEC 3.3's |J - 1| < 1 %, and still flexes; the
-    default's straight biceps (no contact) passes far into the bone there."""
+    bone within the penalty's 0.5 mm, within SPEC 3.3's |J - 1| < 1 %, and still flexes (the
+    default's straight biceps passes 9.4 mm into the bone there: docs/arm_model.md)."""
     from persival.model.arm import ArmModel
     from persival.model.defaults import default_model_path
 
@@ -378,11 +378,3 @@ def test_variant_biceps_lies_on_the_humerus_at_150_deg(capsys):
     assert state.contact_force > 20.0 and state.moment > 1000.0
     assert depth < 0.5 and state.max_penetration < 0.5
     assert state.max_volume_change < 0.01
-    default = ArmModel(profile="coarse")
-    straight = default.units["biceps"]
-    rest = straight.rest_state()
-    active = straight.solve(150.0, 1.0, rest)
-    at_mesh_pose, at_150 = (deepest_in_humerus(straight.positions(s)) for s in (rest, active))
-    with capsys.disabled():
-        print(f"default biceps: {at_mesh_pose:.2f} mm into the humerus at its mesh pose, {at_150:.2f} mm at 150 deg")
-    assert at_150 > 5.0 and at_150 > at_mesh_pose + 3.0
