@@ -215,13 +215,15 @@ def test_solve_reports_progress(states):
 
 
 @pytest.fixture(scope="module")
-def curves(arm, states):
-    """Every muscle's passive and active sweep (persival curves) just below and above the hanging
-    angle, at the mesh pose and at 90 and 120 deg: one continuation per muscle and activation."""
+def curves(arm, states, tables):
+    """Every muscle's passive and active moment (persival curves) just below and above the hanging
+    angle, at the mesh pose and at 90 and 120 deg: the FE states by the exact path on the fixture
+    tables (one continuation sweep per muscle and activation without them: 387 s, the suite's
+    slowest fixture; the sweeps themselves build every table column, tests/test_moment_table.py)."""
     from persival.evaluate.muscle_curves import muscle_curves
 
     theta = np.floor(states[0].elbow_angle_deg)
-    return muscle_curves(arm, np.array([theta, theta + 1.0, 60.0, 90.0, 120.0]))
+    return muscle_curves(arm, np.array([theta, theta + 1.0, 60.0, 90.0, 120.0]), tables=tables)
 
 
 def test_moment_curves_predict_the_hanging_arm(states, curves):

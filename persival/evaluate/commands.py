@@ -77,10 +77,12 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             load_model_file(model)[0].profile(profile)
             check_output_dir(out)
             arm = ArmModel(model, profile)
+        tables = _curve_tables(console, arm)
         with Progress(console=console) as bar:
             task = bar.add_task("muscle sweeps", total=10)
             data = muscle_curves(
-                arm, progress=lambda name, a: bar.update(task, advance=1, description=f"{name} at activation {a:g}"))
+                arm, progress=lambda name, a: bar.update(task, advance=1, description=f"{name} at activation {a:g}"),
+                tables=tables)
         table = Table(title="equilibria predicted by the curves (persival simulate solves them exactly)")
         table.add_column("activations")
         table.add_column("elbow angle (deg)", justify="right")
@@ -303,3 +305,18 @@ def _register_bench_nn(bench_app: typer.Typer) -> None:
         for note in table["notes"]:
             console.print(f"  {note}")
         console.print(f"wrote {layout.evaluate / 'bench_nn.md'} and {layout.evaluate / 'bench_nn.json'}")
+
+
+def _curve_tables(console, arm):
+    """The arm's response tables as a TableSolver when built (their levels run from 0 to 1), else None (sweeps)."""
+    from persival.campaign.arm_simulator import open_tables
+    from persival.campaign.table_solve import TableSolver
+
+    try:
+        table = open_tables(arm)
+    except (FileNotFoundError, ValueError):
+        console.print("[dim]no response tables of this model: sweeping every muscle (minutes; "
+                      "`persival tables` makes this seconds)[/dim]")
+        return None
+    console.print(f"[dim]states from the response tables at {table.root}[/dim]")
+    return TableSolver(arm, table)
