@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["MUSCLES", "N_ACTIVATIONS", "ABBREVIATIONS", "ELBOW_ANGLE_BOUNDS_DEG", "UNITS", "check_activations",
-           "check_activation_vector"]
+           "check_activation_vector", "check_muscle_names"]
 
 #: The five muscles, in the order of every activation vector (SPEC section 1).
 MUSCLES = ("biceps", "brachialis", "brachioradialis", "triceps", "anconeus")
@@ -51,6 +51,17 @@ def check_activations(activations, what: str = "activations") -> np.ndarray:
         raise ValueError(f"{what}: {int(outside.sum())} row(s) lie outside [0, 1]^{N_ACTIVATIONS}, first: "
                          f"row {i}, {MUSCLES[j]} = {float(arr[i, j])!r}")
     return arr
+
+
+def check_muscle_names(names, what: str = "muscles") -> tuple[str, ...]:
+    """A choice of muscles, in vocabulary order: None for all of them, or names as a sequence or a
+    comma-separated string ("biceps, triceps"); ValueError for an empty choice or an unknown name."""
+    if names is None:
+        return MUSCLES
+    chosen = [n.strip() for n in names.split(",")] if isinstance(names, str) else list(names)
+    if not chosen or set(chosen) - set(MUSCLES):
+        raise ValueError(f"{what} must be some of {list(MUSCLES)}, got {names!r}")
+    return tuple(n for n in MUSCLES if n in chosen)
 
 
 def check_activation_vector(activations, what: str = "activations") -> np.ndarray:

@@ -27,8 +27,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         console = Console()
         with user_errors(out=out):
             check_output_file(out)
-            chosen = None if muscles is None else [m.strip() for m in muscles.split(",")]
-            path = render_states(states, out, muscles=chosen)
+            path = render_states(states, out, muscles=muscles)
         console.print(f"wrote {path}")
 
     @app.command()
@@ -50,8 +49,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                 levels = [float(h) for h in heights.split(",")]
             except ValueError:
                 raise ValueError(f"--heights expects comma-separated numbers (mm), got {heights!r}") from None
-            chosen = None if muscles is None else [m.strip() for m in muscles.split(",")]
-            path = render_sections(states, levels, out, chosen)
+            path = render_sections(states, levels, out, muscles)
         console.print(f"wrote {path}")
 
     @app.command()

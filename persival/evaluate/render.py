@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.vocabulary import MUSCLES
+from persival.vocabulary import MUSCLES, check_muscle_names
 
 __all__ = ["read_state_dir", "render_states", "headless_vtk"]
 
@@ -147,7 +147,7 @@ def _shown_displacement(states, reference):
 
 
 def render_states(directories: list[str | Path], out: str | Path, window: tuple[int, int] = (560, 720),
-                  muscles: list[str] | None = None) -> Path:
+                  muscles: list[str] | str | None = None) -> Path:
     """Render each state into its own panel, side by side, with one shared colour scale.
 
     ``window[1]`` is the height of a panel's 3D view in pixels (its width follows the arm's
@@ -157,14 +157,11 @@ def render_states(directories: list[str | Path], out: str | Path, window: tuple[
     headless_vtk()
     if not directories:
         raise ValueError("give at least one state directory")
-    unknown = sorted(set(muscles or ()) - set(MUSCLES))
-    if unknown or muscles == []:
-        raise ValueError(f"muscles to draw must be some of {list(MUSCLES)}, got {muscles}")
+    drawn = check_muscle_names(muscles, "muscles to draw")
     states = [_load(Path(d)) for d in directories]
     reference = _reference(states)
     shown = _shown_displacement(states, reference)
-    if muscles:
-        states = [(summary, {n: m[n] for n in MUSCLES if n in muscles}, bones) for summary, m, bones in states]
+    states = [(summary, {n: m[n] for n in drawn}, bones) for summary, m, bones in states]
     # framed to the muscles (the bones are cut at the frame): every panel has the same height
     # and scale, and its own width
     boxes = [np.array([[p[:, 1].min(), p[:, 2].min()], [p[:, 1].max(), p[:, 2].max()]])

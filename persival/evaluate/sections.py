@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from persival.evaluate.render import BONE_COLOUR, headless_vtk, read_state_dir
-from persival.vocabulary import MUSCLES
+from persival.vocabulary import check_muscle_names
 
 __all__ = ["render_sections"]
 
@@ -32,7 +32,7 @@ def _outline(surface, z: float) -> np.ndarray:
 
 
 def render_sections(directories: list[str | Path], heights_mm: list[float], out: str | Path,
-                    muscles: list[str] | None = None) -> Path:
+                    muscles: list[str] | str | None = None) -> Path:
     """One panel per state: outlines of ``muscles`` (default all) and the bones at each height."""
     headless_vtk()
     import matplotlib
@@ -47,10 +47,7 @@ def render_sections(directories: list[str | Path], heights_mm: list[float], out:
         raise ValueError("give at least one state directory")
     if not heights_mm or not all(np.isfinite(heights_mm)):
         raise ValueError(f"give one or more finite heights (mm along the humerus), got {heights_mm}")
-    chosen = list(MUSCLES) if muscles is None else list(muscles)
-    unknown = sorted(set(chosen) - set(MUSCLES))
-    if unknown or not chosen:
-        raise ValueError(f"muscles to draw must be some of {list(MUSCLES)}, got {muscles}")
+    chosen = check_muscle_names(muscles, "muscles to draw")
     fig, axes = plt.subplots(1, len(directories), figsize=(5.4 * len(directories), 3.0), layout="constrained",
                              squeeze=False)
     for ax, directory in zip(axes[0], directories):

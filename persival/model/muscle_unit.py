@@ -323,7 +323,7 @@ class MuscleUnit:
         P, dP, rate = self._contact_rates(theta_deg, u)
         S, du = self.solver.condensed_response(K, g, reuse_factorization=reuse, force_rate=rate)
         work_slope = S + float(force @ g2) + dP + (0.0 if rate is None else float(rate @ du))
-        state = replace(self._scalars(theta_deg, activation, u, force, contact_work=P),
+        state = replace(self._scalars(theta_deg, activation, u, force, contact_work=P, motion=g),
                         moment_slope=-float(work_slope), sensitivity=du.reshape(-1, 3))
         if reuse:  # a solver's solution: the caller takes max |J - 1| from it
             return state
@@ -331,10 +331,11 @@ class MuscleUnit:
         return replace(state, max_volume_change=float(np.abs(np.linalg.det(F) - 1).max()))
 
     def _scalars(self, theta_deg: float, activation: float, u: np.ndarray, force: np.ndarray,
-                 contact_work: float | None = None) -> MuscleState:
-        """A state with its exact moment (no slope yet): -(f.g + dPi_c/dtheta), f.g = T L' on a line tie."""
+                 contact_work: float | None = None, motion: np.ndarray | None = None) -> MuscleState:
+        """A state with its exact moment (no slope yet): -(f.g + dPi_c/dtheta), f.g = T L' on a line
+        tie; ``motion``: g = dp/dtheta when the caller has it already."""
         L = self.length(theta_deg)
-        g, _ = self.tie.motion(theta_deg, self.mesh.points)
+        g = self.tie.motion(theta_deg, self.mesh.points)[0] if motion is None else motion
         tension, work = self.tie.tension(force, theta_deg), float(force @ g)
         if contact_work is None:
             contact_work = self._contact_rates(theta_deg, u, slopes=False)[0]
