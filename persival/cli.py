@@ -34,14 +34,14 @@ def _register() -> None:
     # Imported here so that `persival --help` stays fast and each stage stays independent.
     from persival import run_command
     from persival.campaign import commands as campaign_commands
-    from persival.campaign import fe_commands
     from persival.deploy import commands as deploy_commands
     from persival.evaluate import commands as evaluate_commands
     from persival.surrogate import commands as surrogate_commands
+    from persival.tables import commands as tables_commands
 
     run_command.register(app)
     campaign_commands.register(app, bench_app)
-    fe_commands.register(app)
+    tables_commands.register(app)
     surrogate_commands.register(app, bench_app)
     evaluate_commands.register(app, bench_app)
     deploy_commands.register(app, bench_app)

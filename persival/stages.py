@@ -60,7 +60,7 @@ def tables(out: Path, config, console) -> dict:
         why = "the campaign runs the analytic stand-in"
         console.print(f"  [yellow]skipped[/yellow]: {why}")
         return {"skipped": why}
-    from persival.campaign.arm_simulator import ensure_tables
+    from persival.tables.open import ensure_tables
 
     t0 = time.perf_counter()
     with console.status("FE arm: meshing, rest states, response table columns (dask), the hanging arm from them") as status:
@@ -90,8 +90,8 @@ def fe(out: Path, config, console) -> dict:
     arm = ArmModel(profile=config.profile)
     solver = None
     if config.simulator == "arm":
-        from persival.campaign.arm_simulator import open_tables
-        from persival.campaign.table_solve import TableSolver
+        from persival.tables.open import open_tables
+        from persival.tables.table_solve import TableSolver
 
         solver = TableSolver(arm, open_tables(arm))
     rows, directories = {}, []
@@ -183,9 +183,9 @@ def inverse(out: Path, config, console) -> dict:
 
 def motion(out: Path, config, console) -> dict:
     """The motion model needs per-muscle FE moments: a moment table of the same arm model."""
-    from persival.campaign.moment_table import MomentTable
     from persival.surrogate.base import load_surrogate
     from persival.surrogate.motion_model import MotionActivationModel, plot_motion_model
+    from persival.tables.moment_table import MomentTable
 
     path = config.moment_table or (out / "tables" / "moments.npz" if config.simulator == "arm" else None)
     if path is None:

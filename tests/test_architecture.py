@@ -1,4 +1,4 @@
-"""Imports flow one way (SPEC 2): model -> campaign -> surrogate -> deploy -> evaluate.
+"""Imports flow one way (SPEC 2): model -> tables -> campaign -> surrogate -> deploy -> evaluate.
 
 Reads every module's imports with ast (function-level imports included, and "module:attr"
 strings that a registry imports by name) and fails on one that reaches a later stage. The
@@ -13,7 +13,7 @@ import re
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "persival"
-STAGES = ("model", "campaign", "surrogate", "deploy", "evaluate")
+STAGES = ("model", "tables", "campaign", "surrogate", "deploy", "evaluate")
 TOP = {"persival.pipeline", "persival.stages", "persival.cli", "persival.run_command"}
 BOTTOM, ABOVE_ALL = -1, len(STAGES)
 # a lazily imported factory, e.g. "persival.campaign.analytic:AnalyticSimulator"

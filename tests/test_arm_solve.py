@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from persival.campaign.moment_table import TableMismatchError
-from persival.campaign.response_table import ResponseTable
-from persival.campaign.table_solve import TableSolver
 from persival.model.arm import ArmModel
 from persival.model.solver import ConvergenceError
 from persival.model.state_cache import mesh_fingerprint
+from persival.tables.moment_table import TableMismatchError
+from persival.tables.response_table import ResponseTable
+from persival.tables.table_solve import TableSolver
 
 FIXTURE = Path(__file__).parent / "data" / "response_table_coarse"
 

@@ -23,8 +23,8 @@ CASES = [
     ("run", ["--out", "afile"], "file where a folder is expected", "is a file, not a folder"),
     ("simulate", ["-a", "1.5,0,0,0,0", "--out", "new"], "out of range", "biceps = 1.5"),
     ("simulate", ["-a", "0,nan,0,0,0", "--out", "new"], "not finite", "not finite"),
-    ("simulate", ["-a", "0.5,x", "--out", "new"], "malformed", BOX),
-    ("simulate", ["-a", "0.5,0,0", "--out", "new"], "too few values", BOX),
+    ("simulate", ["-a", "0.5,x", "--out", "new"], "malformed", "--activations must be comma-separated numbers"),
+    ("simulate", ["-a", "0.5,0,0", "--out", "new"], "too few values", "--activations needs 5 numbers"),
     ("simulate", ["-a", "0,0,0,0,0", "--model", "nosuch.toml", "--out", "new"], "missing file", "no such file"),
     ("simulate", ["-a", "0,0,0,0,0", "--model", "folder", "--out", "new"], "folder where a file is expected",
      "is a directory"),
@@ -124,9 +124,9 @@ CASES = [
     ("moments", ["--out", "folder"], "folder where a file is expected", "is a folder, not a file"),
     ("motion", ["--table", "nosuch.npz", "--out", "new"], "missing table", "no such moment table"),
     ("motion", ["--table", "afile", "--out", "new"], "foreign table", "not a moment table"),
-    ("motion", ["--table", "afile", "--out", "new", "--loads", "1,-2"], "negative load", "must be finite and >= 0"),
-    ("motion", ["--table", "afile", "--out", "new", "--loads", "nan"], "non-finite load", "must be finite and >= 0"),
-    ("motion", ["--table", "afile", "--out", "new", "--angles", "inf"], "non-finite angle", "--angles must be finite"),
+    ("motion", ["--table", "afile", "--out", "new", "--loads", "1,-2"], "negative load", "--loads must be >= 0"),
+    ("motion", ["--table", "afile", "--out", "new", "--loads", "nan"], "non-finite load", "not finite"),
+    ("motion", ["--table", "afile", "--out", "new", "--angles", "inf"], "non-finite angle", "not finite"),
 ]
 
 

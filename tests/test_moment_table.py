@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from persival.campaign.moment_table import MomentTable, TableMismatchError, build_moment_table
 from persival.model.arm_file import load_model_file
+from persival.tables.moment_table import MomentTable, TableMismatchError, build_moment_table
 from persival.vocabulary import MUSCLES
 
 FIXTURE = Path(__file__).parent / "data" / "moments_coarse.npz"

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from persival.campaign.moment_table import MomentTable
 from persival.surrogate.motion_model import MotionActivationModel, _moments_at, least_effort
+from persival.tables.moment_table import MomentTable
 from persival.vocabulary import MUSCLES
 
 FIXTURE = Path(__file__).parent / "data" / "moments_coarse.npz"

@@ -18,11 +18,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from persival.campaign.moment_table import TableMismatchError
-from persival.campaign.response_table import ResponseTable, build_response_table
-from persival.campaign.table_solve import OutsideTableError, TableSolver
 from persival.model.arm import ArmModel
 from persival.model.state_cache import mesh_fingerprint
+from persival.tables.moment_table import TableMismatchError
+from persival.tables.response_table import ResponseTable, build_response_table
+from persival.tables.table_solve import OutsideTableError, TableSolver
 from persival.vocabulary import MUSCLES
 
 FIXTURE = Path(__file__).parent / "data" / "response_table_coarse"
@@ -215,7 +215,7 @@ def test_rest_state_comes_from_the_cache_the_second_time(arm):
 def test_hanging_arm_from_the_tables_is_the_direct_one(arm, solver, tmp_path, monkeypatch):
     """ensure_tables caches the rest states first (the table workers need them), then the hanging
     arm by the tables' exact path: the same FE equilibrium as the continuation from the mesh poses."""
-    from persival.campaign.arm_simulator import hanging_from_tables
+    from persival.tables.open import hanging_from_tables
 
     direct = arm.base_state()
     monkeypatch.setenv("PERSIVAL_CACHE", str(tmp_path))

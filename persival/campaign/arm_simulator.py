@@ -15,7 +15,7 @@ from persival.campaign.simulator import ReferenceGeometry, SimulationResult, Sur
 from persival.model.arm import ArmModel, ArmState
 from persival.model.mesh import Tet10Mesh
 from persival.model.output import muscle_submesh
-from persival.model.solver import ConvergenceError
+from persival.tables.open import ensure_tables, open_tables
 from persival.vocabulary import MUSCLES
 
 
@@ -41,28 +41,11 @@ def muscle_surface(arm: ArmModel, name: str) -> tuple[np.ndarray, np.ndarray]:
 METHODS = ("tables", "direct", "interpolate")
 
 
-def open_tables(arm: ArmModel, tables: str | None = None):
-    """The complete response table of ``arm`` (default folder: its state cache), or a clear error."""
-    from persival.campaign.response_table import ResponseTable, default_table_dir
-    from persival.model.state_cache import mesh_fingerprint
-
-    root = tables or default_table_dir(arm)
-    try:
-        table = ResponseTable.open(root, arm.model_hash, arm.profile, mesh_fingerprint(arm.mesh))
-    except FileNotFoundError:
-        raise FileNotFoundError(f"no response table of this model at {root}: build it with "
-                                f"`persival tables --profile {arm.profile}` (or use --option method=direct)") from None
-    if not table.complete:
-        raise ValueError(f"the response table at {root} is unfinished ({int(table.done.sum())} of {table.done.size} "
-                         f"columns): finish it with `persival tables --profile {arm.profile}`")
-    return table
-
-
 class ArmSimulator:
     """Simulator protocol of persival.campaign over :class:`ArmModel` (warm starts: ArmState).
 
     ``method``: "tables" (default; SPEC 8 route): the exact FE state from the per-muscle
-    response tables (persival.campaign.table_solve), which must be built first
+    response tables (persival.tables.table_solve), which must be built first
     (``persival tables``, or :func:`ensure_tables`); a retry falls back to the direct solve.
     "direct": the coupled solve continued from the hanging arm or a neighbour.
     "interpolate": the table-only path (no FE solve; a surrogate, for comparisons).
@@ -80,7 +63,7 @@ class ArmSimulator:
         self.surfaces = {name: muscle_surface(self.arm, name) for name in MUSCLES}
         self.table_solver = None
         if method != "direct":
-            from persival.campaign.table_solve import TableSolver
+            from persival.tables.table_solve import TableSolver
 
             self.table_solver = TableSolver(self.arm, open_tables(self.arm, tables))
 
@@ -101,7 +84,7 @@ class ArmSimulator:
             return self._interpolated(activations), None
         state = None
         if self.table_solver is not None and attempt == 0:
-            from persival.campaign.table_solve import OutsideTableError
+            from persival.tables.table_solve import OutsideTableError
 
             try:
                 state = self.table_solver.solve(activations)
@@ -128,38 +111,6 @@ class ArmSimulator:
         x = self.arm.mesh.points + u
         return SimulationResult(elbow_angle_deg=theta, surfaces={name: x[ids] for name, (ids, _) in self.surfaces.items()},
                                 statistics={"path": "interpolate"}, wall_time_s=time.perf_counter() - t0)
-
-
-def ensure_tables(model_file=None, profile: str = "quick", tables: str | None = None, progress=None,
-                  scheduler: str | None = None, n_workers: int | None = None, angles=None, levels=None):
-    """Build (or finish) the response tables the ``tables`` method needs; returns the table.
-    ``angles``, ``levels``: the grid (default: response_table's DEFAULT_ANGLES, DEFAULT_LEVELS)."""
-    from persival.campaign.response_table import DEFAULT_ANGLES, DEFAULT_LEVELS, build_response_table
-
-    arm = ArmModel(model_file, profile)
-    arm.rest_states()  # cached: the table workers read each muscle's rest state from it
-    table = build_response_table(arm, tables, DEFAULT_ANGLES if angles is None else angles,
-                                 DEFAULT_LEVELS if levels is None else levels, model_file=model_file, scheduler=scheduler,
-                                 n_workers=n_workers, progress=progress)
-    if not arm.has_cached_base():
-        hanging_from_tables(arm, table)
-    return table
-
-
-def hanging_from_tables(arm, table):
-    """The hanging arm (activations 0) by the tables' exact path, kept in the state cache: a
-    converged FE equilibrium in seconds, where the continuation from the mesh poses took 80 s
-    (quick mesh; the a = 0 column already holds every muscle near where it hangs)."""
-    from persival.campaign.table_solve import OutsideTableError, TableSolver
-
-    if not table.complete:
-        return None
-    try:
-        state = TableSolver(arm, table).solve(np.zeros(5), near_deg=arm.start_angle_deg)
-    except (ConvergenceError, OutsideTableError):
-        return None  # base_state solves it directly when first asked
-    arm.adopt_base_state(state)
-    return state
 
 
 def prepare_spec(spec, progress=None, scheduler: str | None = None, n_workers: int | None = None):

@@ -8,7 +8,7 @@ from pathlib import Path
 import typer
 
 from persival.campaign.options import build_design, build_spec
-from persival.cli_errors import check_output_dir, check_output_file, user_errors
+from persival.cli_errors import check_output_dir, user_errors
 from persival.cli_help import FullHelpGroup
 
 _SIMULATOR_HELP = ("Simulator kind: arm (the built-in FE model), analytic (closed-form test model) "
@@ -120,7 +120,6 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             res = export_vtu(store, out, progress=progress)
         typer.echo(f"wrote {res['states']} states to {res['out']} (open campaign.pvd in ParaView)")
 
-    _register_moments(app)
 
 
 def _prepare(spec, scheduler, workers) -> None:
@@ -156,77 +155,3 @@ def _print_summary(summary: dict) -> None:
     for reason, count in summary["failure_reasons"].items():
         table.add_row(f"failed x{count}", reason)
     Console().print(table)
-
-
-def parse_grid(text: str, what: str) -> list[float]:
-    """'0:160:10' (start:stop:step, stop included) or a comma-separated list."""
-    import numpy as np
-
-    try:
-        if ":" in text:
-            start, stop, step = (float(t) for t in text.split(":"))
-            if not step > 0 or not np.isfinite([start, stop, step]).all():
-                raise ValueError
-            return [float(v) for v in np.arange(start, stop + 1e-9 * max(1.0, abs(stop)), step)]
-        return [float(t) for t in text.split(",") if t.strip()]
-    except ValueError:
-        raise ValueError(f"{what} must be START:STOP:STEP or comma-separated numbers, got {text!r}") from None
-
-
-def _register_moments(app: typer.Typer) -> None:
-    """``persival moments``: the per-muscle FE moment table (issue 17; SPEC 3.3, 8)."""
-
-    @app.command("moments")
-    def moments(
-        out: Path = typer.Option(..., "--out", help="Table file (.npz); an unfinished one of the same grid is resumed."),
-        profile: str = typer.Option("quick", "--profile", help="Mesh profile (coarse, quick, paper)."),
-        model: Path = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
-        angles: str = typer.Option("0:160:10", "--angles", help="Elbow angles, deg: START:STOP:STEP or a list."),
-        levels: str = typer.Option("0,0.25,0.5,0.75,1", "--levels", help="Activation levels from 0 to 1."),
-    ) -> None:
-        """Per-muscle FE moment tables over (elbow angle, activation), by continuation along the angle."""
-        import time
-
-        from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-        from persival.campaign.moment_table import build_moment_table, check_grids, resumable
-        from persival.model.arm import ArmModel
-        from persival.model.arm_file import load_model_file
-
-        console = Console()
-        with user_errors(out=out):  # every check before the meshing; a new file is removed on a user error
-            grid = check_grids(parse_grid(angles, "--angles"), parse_grid(levels, "--levels"))
-            spec, model_hash = load_model_file(model)
-            spec.profile(profile)
-            check_output_file(out)
-            resumable(out, model_hash, profile, *grid)
-            arm = ArmModel(model, profile)
-        t0 = time.perf_counter()
-        bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), console=console)
-        with bar, user_errors():
-            task = bar.add_task("moment table", total=5 * len(grid[1]))
-            table = build_moment_table(arm, *grid, out=out, progress=lambda done, total, label: bar.update(
-                task, completed=done, description=label))
-        print_moment_table(console, table, time.perf_counter() - t0, out)
-
-
-def print_moment_table(console, table, seconds: float, out: Path) -> None:
-    """Fully active moments at a few angles, failed solves and compute seconds per muscle."""
-    import numpy as np
-    from rich.table import Table
-
-    from persival.vocabulary import MUSCLES
-
-    t = Table(title=f"fully active moments (N mm) and failed solves; {seconds:.0f} s this run, {out}")
-    t.add_column("muscle")
-    picks = [k for k in range(len(table.angles_deg)) if k % max(1, len(table.angles_deg) // 4) == 0]
-    for k in picks:
-        t.add_column(f"{table.angles_deg[k]:g} deg", justify="right")
-    t.add_column("NaN", justify="right")
-    t.add_column("s", justify="right")
-    moments = table.moments
-    for m, name in enumerate(MUSCLES):
-        secs = sum(s for s in table.meta["column_seconds"][m] if s is not None)
-        t.add_row(name, *[f"{moments[m, k, -1]:.0f}" for k in picks], str(int(np.isnan(moments[m]).sum())), f"{secs:.0f}")
-    console.print(t)

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 import time
 import uuid
 from collections import deque
@@ -39,6 +38,7 @@ from persival.campaign.design import Design, chunks, solve_order
 from persival.campaign.execute import StateOutcome, StateTask, solve_state
 from persival.campaign.simulator import SimulatorSpec, cached_simulator, simulator_factory
 from persival.campaign.store import CampaignStore
+from persival.cluster import local_cluster
 
 __all__ = ["run_campaign", "INLINE"]
 
@@ -47,27 +47,6 @@ INLINE = "inline"
 _BACKSTOP_GRACE_S = 60.0
 _POLL_S = 0.5
 log = logging.getLogger(__name__)
-
-
-def available_cores() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
-
-
-# dask's nanny already sets OMP/MKL/OpenBLAS threads to 1 in its workers; numba's own pool is
-# not covered and took one thread per core in every worker (2 workers x 2 threads on 2 cores,
-# measured with numba.get_num_threads() in the workers): the FE kernels then fight for the cores.
-WORKER_ENV = {"NUMBA_NUM_THREADS": "1"}
-
-
-def local_cluster(n_workers: int | None = None):
-    """A LocalCluster of single-threaded worker processes (one per core by default)."""
-    from distributed import LocalCluster
-
-    return LocalCluster(n_workers=n_workers or available_cores(), threads_per_worker=1, processes=True,
-                        dashboard_address=None, silence_logs=logging.CRITICAL, env=WORKER_ENV)
 
 
 def _check_args(design, spec, timeout_s, max_attempts, n_workers, chunk_size) -> None:

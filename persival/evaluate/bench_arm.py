@@ -29,13 +29,13 @@ def _peak_mb() -> dict:
 def run_arm_benchmark(profile: str = "quick", states: int = 10, direct: int = 0, campaign_level: int = 2,
                       seed: int = 0, progress=None) -> dict:
     """Every timing of the module docstring; ``direct`` of the ``states`` are also solved directly."""
-    from persival.campaign.arm_simulator import ensure_tables
     from persival.campaign.design import Design
     from persival.campaign.runner import run_campaign
     from persival.campaign.simulator import SimulatorSpec
-    from persival.campaign.table_solve import OutsideTableError, TableSolver
     from persival.model.arm import ArmModel
     from persival.model.solver import ConvergenceError
+    from persival.tables.open import ensure_tables
+    from persival.tables.table_solve import OutsideTableError, TableSolver
 
     say = progress or (lambda text: None)
     result: dict = {"profile": profile}

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from persival.cli_errors import check_output_dir, check_output_file, user_errors
+from persival.cli_values import parse_numbers
 from persival.model.defaults import profiles_help
 
 
@@ -45,10 +46,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         console = Console()
         with user_errors(out=out):
             check_output_file(out)
-            try:
-                levels = [float(h) for h in heights.split(",")]
-            except ValueError:
-                raise ValueError(f"--heights expects comma-separated numbers (mm), got {heights!r}") from None
+            levels = parse_numbers(heights, "--heights", "mm")
             path = render_sections(states, levels, out, muscles)
         console.print(f"wrote {path}")
 
@@ -307,8 +305,8 @@ def _register_bench_nn(bench_app: typer.Typer) -> None:
 
 def _curve_tables(console, arm):
     """The arm's response tables as a TableSolver when built (their levels run from 0 to 1), else None (sweeps)."""
-    from persival.campaign.arm_simulator import open_tables
-    from persival.campaign.table_solve import TableSolver
+    from persival.tables.open import open_tables
+    from persival.tables.table_solve import TableSolver
 
     try:
         table = open_tables(arm)

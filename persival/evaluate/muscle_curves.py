@@ -8,7 +8,7 @@ activation. They are the tool for editing a model file (mesh poses, bows, fibre 
 without solving full states; ``persival simulate`` gives the exact equilibrium of one state.
 Where the model's response tables are built (``persival tables``, levels 0 and 1 among theirs),
 each point is the same FE equilibrium by the tables' exact path (Newton from the tabulated
-states, persival.campaign.table_solve): seconds instead of minutes of continuation.
+states, persival.tables.table_solve): seconds instead of minutes of continuation.
 """
 
 from __future__ import annotations
@@ -17,17 +17,17 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.campaign.moment_table import sweep_muscle
 from persival.figures import save_figure
 from persival.model.arm import ArmModel
 from persival.model.solver import ConvergenceError
+from persival.tables.moment_table import sweep_muscle
 from persival.vocabulary import MUSCLES
 
 
 def muscle_curves(arm: ArmModel, angles=None, progress=None, tables=None) -> dict:
     """Passive and active tension (N) and moment (N mm) of every muscle at each angle (deg).
 
-    ``tables``: a :class:`~persival.campaign.table_solve.TableSolver` of this arm to take the
+    ``tables``: a :class:`~persival.tables.table_solve.TableSolver` of this arm to take the
     states from (default: continuation sweeps). Unreached points (a solve that did not
     converge) are NaN.
     """

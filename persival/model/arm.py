@@ -118,7 +118,7 @@ class ArmModel(ArmStateCache, ArmBody):
 
     def equilibrium_from(self, activations, start: dict[str, MuscleState], angle_deg: float, progress=None) -> ArmState:
         """Joint equilibrium for ``activations`` continued from given muscle states near
-        ``angle_deg`` (e.g. interpolated from response tables, persival.campaign.response_table)."""
+        ``angle_deg`` (e.g. interpolated from response tables, persival.tables.response_table)."""
         target = check_activation_vector(activations)
         t0 = time.perf_counter()
         state = self._equilibrium(target, start, float(angle_deg), SolveTracker(progress))

@@ -8,6 +8,7 @@ import typer
 
 from persival.cli_errors import check_output_dir, fail, user_errors
 from persival.cli_help import FullHelpGroup
+from persival.cli_values import parse_numbers
 
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
@@ -97,10 +98,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
 
 
 def _angles(text: str) -> list[float]:
-    try:
-        return [float(t) for t in text.split(",") if t.strip()]
-    except ValueError:
-        raise ValueError(f"--angles must be comma-separated numbers in degrees, got {text!r}") from None
+    return parse_numbers(text, "--angles", "deg")
 
 
 def _progress_bar(description: str):
@@ -213,16 +211,7 @@ def _register_inverse_and_networks(app: typer.Typer) -> None:
 
 
 def _loads(text: str) -> list[float]:
-    import math
-
-    try:
-        values = [float(t) for t in text.split(",") if t.strip()]
-    except ValueError:
-        raise ValueError(f"--loads must be comma-separated numbers in kg, got {text!r}") from None
-    bad = [v for v in values if not math.isfinite(v) or v < 0]
-    if bad or not values:
-        raise ValueError(f"--loads must be finite and >= 0 kg, got {text!r}")
-    return values
+    return parse_numbers(text, "--loads", "kg", minimum=0.0)
 
 
 def _register_motion(app: typer.Typer) -> None:
@@ -239,9 +228,9 @@ def _register_motion(app: typer.Typer) -> None:
         import numpy as np
         from rich.console import Console
 
-        from persival.campaign.moment_table import MomentTable
         from persival.model.arm_file import load_model_file
         from persival.surrogate.motion_model import MotionActivationModel, plot_motion_model
+        from persival.tables.moment_table import MomentTable
 
         with user_errors(out=out):
             targets, masses = _angles(angles), _loads(loads)

@@ -1,7 +1,7 @@
 """The motion-and-load activation model (SPEC 5, "Beyond the paper"; issue 12).
 
 ``(Theta, dTheta/dt, d2Theta/dt2, load) -> alpha`` from the per-muscle FE moment tables
-(:mod:`persival.campaign.moment_table`). The hinge's equation of motion about the elbow
+(:mod:`persival.tables.moment_table`). The hinge's equation of motion about the elbow
 (flexion positive, SPEC 3.3) is ``I(load) Theta'' = sum_m M_m(Theta, a_m) + M_g(Theta) +
 M_load(Theta) + M_p(Theta)``, so the muscles must supply the required moment
 

@@ -1,7 +1,7 @@
 """The FE arm's response tables as a surrogate (issue 17): five 2-D interpolations and one root.
 
 Beyond the paper: instead of one 5-D sparse grid over the activations, each muscle's states are
-tabulated over its own two variables (elbow angle, own activation; persival.campaign.response_table)
+tabulated over its own two variables (elbow angle, own activation; persival.tables.response_table)
 and an activation vector is answered by the scalar joint equilibrium on the tabulated moments and
 the interpolated node states there (:meth:`TableSolver.interpolate`, the "table-only path").
 Its cost is in the tables (built once per model by ``persival tables``), not in a campaign.
@@ -46,9 +46,9 @@ class ResponseTableSurrogate:
     def solver(self):
         """The table solver (opened on first use: it meshes or reads the cached mesh)."""
         if self._solver is None:
-            from persival.campaign.arm_simulator import open_tables
-            from persival.campaign.table_solve import TableSolver
             from persival.model.arm import ArmModel
+            from persival.tables.open import open_tables
+            from persival.tables.table_solve import TableSolver
 
             arm = ArmModel(self.model_file, self.profile)
             self._solver = TableSolver(arm, open_tables(arm, self.tables))

@@ -1,8 +1,7 @@
-"""CLI of the FE arm as a data engine: ``persival tables`` and ``persival simulate`` (issue 17).
+"""CLI of the FE arm as a data engine: ``persival tables``, ``persival simulate`` and ``persival moments``.
 
-They live with the campaign stage because that is where the FE arm is a simulator: the response
-tables are built in parallel with dask and stored like a campaign, and ``simulate`` answers from
-them (the exact path of persival.campaign.table_solve) when they exist.
+The response tables are built in parallel with dask; ``simulate`` answers from them (the exact
+path of persival.tables.table_solve) when they exist, and FE-arm campaigns read them.
 """
 
 from __future__ import annotations
@@ -12,26 +11,17 @@ from pathlib import Path
 
 import typer
 
-from persival.cli_errors import check_output_dir, user_errors
+from persival.cli_errors import check_output_dir, check_output_file, user_errors
+from persival.cli_values import parse_activations, parse_grid
 from persival.model.defaults import profiles_help
 from persival.vocabulary import MUSCLES, N_ACTIVATIONS
 
 ACTIVATIONS_HELP = f"{N_ACTIVATIONS} comma-separated activations in [0, 1], in the order {', '.join(MUSCLES)}; e.g. 0.5,0,0,0,0."
 
 
-def parse_activations(text: str) -> list[float]:
-    """The --activations option: malformed text is typer's usage error (the range: check_activations)."""
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise typer.BadParameter(f"activations must be {N_ACTIVATIONS} comma-separated numbers, e.g. 0.5,0,0,0,0") from None
-    if len(values) != N_ACTIVATIONS:
-        raise typer.BadParameter(f"need {N_ACTIVATIONS} activations ({', '.join(MUSCLES)}), got {len(values)}")
-    return values
-
-
 def register(app: typer.Typer) -> None:
-    """Attach ``tables`` and ``simulate`` to the main app."""
+    """Attach ``tables``, ``simulate`` and ``moments`` to the main app."""
+    _register_moments(app)
 
     @app.command("tables")
     def tables(
@@ -55,10 +45,9 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-        from persival.campaign.arm_simulator import ensure_tables
-        from persival.campaign.commands import parse_grid
-        from persival.campaign.moment_table import TableMismatchError, check_grids
         from persival.model.arm_file import load_model_file
+        from persival.tables.moment_table import TableMismatchError, check_grids
+        from persival.tables.open import ensure_tables
 
         console = Console()
         with user_errors(TableMismatchError):
@@ -106,9 +95,8 @@ def register(app: typer.Typer) -> None:
         from persival.vocabulary import check_activation_vector
 
         console = Console()
-        alpha = parse_activations(activations)
         with user_errors():  # every input is checked before the meshing and solve
-            alpha = check_activation_vector(alpha).tolist()
+            alpha = check_activation_vector(parse_activations(activations)).tolist()
             spec = load_model_file(model)[0]
             spec.profile(profile)
             lower, upper = spec.joint.limits_deg
@@ -136,11 +124,11 @@ def register(app: typer.Typer) -> None:
 
 def _solve_one(console, model, profile: str, method: str, alpha):
     """(state, arm, 'tables' | 'direct') for one activation vector; a failed solve is a typer.Exit(3)."""
-    from persival.campaign.arm_simulator import open_tables
-    from persival.campaign.table_solve import TableSolver
     from persival.model.arm import ArmModel
     from persival.model.progress import ConsoleProgress
     from persival.model.solver import ConvergenceError
+    from persival.tables.open import open_tables
+    from persival.tables.table_solve import TableSolver
 
     with console.status("meshing the arm (gmsh, cached after the first run)"):
         arm = ArmModel(model, profile)
@@ -188,9 +176,66 @@ def _hold_one(console, model, profile: str, alpha, angle: float):
 
 
 def _print_table(console, table, seconds: float) -> None:
-    from persival.campaign.commands import print_moment_table
-
     moments = table.moment_table()
     print_moment_table(console, moments, seconds, table.root)
     lo, hi = moments.finite_range_deg()
     console.print(f"{int(table.done.sum())} of {table.done.size} columns, angles {lo:g} to {hi:g} deg converged at every level")
+
+
+def _register_moments(app: typer.Typer) -> None:
+    """``persival moments``: the per-muscle FE moment table (issue 17; SPEC 3.3, 8)."""
+
+    @app.command("moments")
+    def moments(
+        out: Path = typer.Option(..., "--out", help="Table file (.npz); an unfinished one of the same grid is resumed."),
+        profile: str = typer.Option("quick", "--profile", help="Mesh profile (coarse, quick, paper)."),
+        model: Path = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+        angles: str = typer.Option("0:160:10", "--angles", help="Elbow angles, deg: START:STOP:STEP or a list."),
+        levels: str = typer.Option("0,0.25,0.5,0.75,1", "--levels", help="Activation levels from 0 to 1."),
+    ) -> None:
+        """Per-muscle FE moment tables over (elbow angle, activation), by continuation along the angle."""
+        import time
+
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        from persival.model.arm import ArmModel
+        from persival.model.arm_file import load_model_file
+        from persival.tables.moment_table import build_moment_table, check_grids, resumable
+
+        console = Console()
+        with user_errors(out=out):  # every check before the meshing; a new file is removed on a user error
+            grid = check_grids(parse_grid(angles, "--angles"), parse_grid(levels, "--levels"))
+            spec, model_hash = load_model_file(model)
+            spec.profile(profile)
+            check_output_file(out)
+            resumable(out, model_hash, profile, *grid)
+            arm = ArmModel(model, profile)
+        t0 = time.perf_counter()
+        bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), console=console)
+        with bar, user_errors():
+            task = bar.add_task("moment table", total=5 * len(grid[1]))
+            table = build_moment_table(arm, *grid, out=out, progress=lambda done, total, label: bar.update(
+                task, completed=done, description=label))
+        print_moment_table(console, table, time.perf_counter() - t0, out)
+
+
+def print_moment_table(console, table, seconds: float, out: Path) -> None:
+    """Fully active moments at a few angles, failed solves and compute seconds per muscle."""
+    import numpy as np
+    from rich.table import Table
+
+    from persival.vocabulary import MUSCLES
+
+    t = Table(title=f"fully active moments (N mm) and failed solves; {seconds:.0f} s this run, {out}")
+    t.add_column("muscle")
+    picks = [k for k in range(len(table.angles_deg)) if k % max(1, len(table.angles_deg) // 4) == 0]
+    for k in picks:
+        t.add_column(f"{table.angles_deg[k]:g} deg", justify="right")
+    t.add_column("NaN", justify="right")
+    t.add_column("s", justify="right")
+    moments = table.moments
+    for m, name in enumerate(MUSCLES):
+        secs = sum(s for s in table.meta["column_seconds"][m] if s is not None)
+        t.add_row(name, *[f"{moments[m, k, -1]:.0f}" for k in picks], str(int(np.isnan(moments[m]).sum())), f"{secs:.0f}")
+    console.print(t)

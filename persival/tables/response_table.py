@@ -4,10 +4,10 @@ SPEC 3.3 / 8, issue 17. Without muscle-muscle contact every muscle is its own FE
 state depends on the elbow angle theta and its own activation a_m only, so a table of each
 muscle's FE equilibria on a (theta, a) grid answers the whole arm: the joint equilibrium of any
 activation vector is one scalar equation in the tabulated moments, and each muscle's shape at
-the root is its table state there (:mod:`persival.campaign.table_solve` uses the tables).
+the root is its table state there (:mod:`persival.tables.table_solve` uses the tables).
 
 A column is one muscle at one activation level over every table angle, computed by continuation
-along theta (:func:`~persival.campaign.moment_table.sweep_muscle`), each level continued from
+along theta (:func:`~persival.tables.moment_table.sweep_muscle`), each level continued from
 the previous level's longest state (continuation along a). Layout of a table folder:
 
     header.json                  format, model hash, profile, mesh fingerprint, angles, levels
@@ -31,9 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.campaign.moment_table import MomentTable, TableMismatchError, check_grids, empty_moment_table, sweep_muscle
 from persival.model.muscle_state import MuscleState
 from persival.model.state_cache import mesh_fingerprint
+from persival.tables.moment_table import MomentTable, TableMismatchError, check_grids, empty_moment_table, sweep_muscle
 from persival.vocabulary import MUSCLES
 
 __all__ = ["FORMAT", "VERSION", "DEFAULT_ANGLES", "DEFAULT_LEVELS", "ResponseTable", "TableMismatchError", "build_response_table",
@@ -281,7 +281,7 @@ def build_response_table(arm, root: str | Path | None = None, angles=DEFAULT_ANG
         return table
     from distributed import Client, wait
 
-    from persival.campaign.runner import available_cores, local_cluster
+    from persival.cluster import available_cores, local_cluster
 
     cluster = None
     if scheduler is None:

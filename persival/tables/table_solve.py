@@ -1,6 +1,6 @@
 """The FE arm's state for any activation vector from its response tables (SPEC 8, issue 17).
 
-Two paths, both from :class:`~persival.campaign.response_table.ResponseTable`:
+Two paths, both from :class:`~persival.tables.response_table.ResponseTable`:
 
 * **exact** (:meth:`TableSolver.solve`): the scalar joint equilibrium
   ``sum_m M_m(theta, a_m) + M_gravity + M_joint = 0`` on the tabulated moments (Hermite in
@@ -24,10 +24,10 @@ from dataclasses import replace
 import numpy as np
 from scipy.optimize import brentq
 
-from persival.campaign.response_table import ResponseTable
 from persival.model.muscle_state import MuscleState
 from persival.model.muscle_unit import ConvergenceError
 from persival.model.state_library import hermite_blend
+from persival.tables.response_table import ResponseTable
 from persival.vocabulary import MUSCLES, check_activation_vector
 
 __all__ = ["TableSolver", "OutsideTableError"]
