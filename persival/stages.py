@@ -63,9 +63,15 @@ def tables(out: Path, config, console) -> dict:
     from persival.tables.open import ensure_tables
 
     t0 = time.perf_counter()
-    with console.status("FE arm: meshing, rest states, response table columns (dask), the hanging arm from them") as status:
-        table = ensure_tables(None, config.profile, None,
-                              lambda done, total: status.update(f"FE arm: response table columns {done}/{total}"))
+    from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
+
+    from persival.log_progress import progress_bar
+
+    with progress_bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      console=console) as bar:
+        task = bar.add_task("FE arm: meshing, rest states", total=None)
+        table = ensure_tables(None, config.profile, None, lambda done, total: bar.update(
+            task, completed=done, total=total, description="FE arm: response table columns (dask)"))
     moments = table.moment_table()
     moments.save(out / "tables" / "moments.npz")
     lo, hi = moments.finite_range_deg()

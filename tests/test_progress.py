@@ -37,3 +37,22 @@ def test_lines_when_not_a_terminal_also_while_a_step_takes_long():
     lines = out.getvalue().splitlines()
     assert lines[0].startswith("  FE: hanging: joint iteration 0") and "biceps load step t = 0.25" in lines[0]
     assert len(lines) >= 3 and all("s on the next step" in line for line in lines[1:])
+
+
+def test_progress_bar_prints_lines_to_a_log_file_with_a_heartbeat():
+    from persival.log_progress import LineProgress, progress_bar
+
+    out = io.StringIO()
+    console = Console(file=out, force_terminal=False, width=200)
+    with progress_bar(console=console, interval_s=0.3) as bar:
+        assert isinstance(bar, LineProgress)
+        task = bar.add_task("campaign", total=4)
+        bar.update(task, advance=1, info="1 done")  # the first update prints at once
+        time.sleep(0.8)  # nothing happens: the heartbeat still prints
+        bar.advance(task, 3)  # done: a last line
+    lines = out.getvalue().splitlines()
+    assert lines[0].startswith("  campaign: 1/4 1 done, 0:00 elapsed")
+    assert len(lines) >= 3 and lines[-1].startswith("  campaign: 4/4")
+    assert sum(line.startswith("  campaign: 1/4") for line in lines) >= 2  # heartbeat lines while stuck at 1
+    terminal = Console(file=io.StringIO(), force_terminal=True)
+    assert not isinstance(progress_bar(console=terminal), LineProgress)

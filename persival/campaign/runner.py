@@ -291,13 +291,14 @@ class _Progress:
             from rich.progress import (
                 BarColumn,
                 MofNCompleteColumn,
-                Progress,
                 ProgressColumn,
                 TextColumn,
                 TimeElapsedColumn,
                 TimeRemainingColumn,
             )
             from rich.text import Text
+
+            from persival.log_progress import progress_bar
 
             class RateColumn(ProgressColumn):
                 def render(self, task):
@@ -306,7 +307,7 @@ class _Progress:
                         return Text("-- states/h", style="progress.data.speed")
                     return Text(f"{speed * 3600:,.0f} states/h", style="progress.data.speed")
 
-            self._progress = Progress(
+            self._progress = progress_bar(
                 TextColumn("[bold]campaign"), BarColumn(), MofNCompleteColumn(),
                 TextColumn("{task.fields[info]}"), RateColumn(), TimeElapsedColumn(),
                 TextColumn("ETA"), TimeRemainingColumn(),

@@ -61,10 +61,10 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
 
         import numpy as np
         from rich.console import Console
-        from rich.progress import Progress
         from rich.table import Table
 
         from persival.evaluate.muscle_curves import REPORTED_SETS, band_check, muscle_curves, plot_curves, predicted_equilibrium
+        from persival.log_progress import progress_bar
         from persival.model.arm import ArmModel
         from persival.model.arm_file import load_model_file
 
@@ -74,7 +74,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             check_output_dir(out)
             arm = ArmModel(model, profile)
         tables = _curve_tables(console, arm)
-        with Progress(console=console) as bar:
+        with progress_bar(console=console) as bar:
             task = bar.add_task("muscle sweeps", total=10)
             data = muscle_curves(
                 arm, progress=lambda name, a: bar.update(task, advance=1, description=f"{name} at activation {a:g}"),

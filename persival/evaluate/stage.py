@@ -52,9 +52,11 @@ class _Steps:
     def __init__(self, progress, console=None) -> None:
         self.own = progress is True
         if self.own:
-            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+            from rich.progress import BarColumn, TextColumn, TimeElapsedColumn
 
-            progress = Progress(TextColumn("{task.description}"), BarColumn(),
+            from persival.log_progress import progress_bar
+
+            progress = progress_bar(TextColumn("{task.description}"), BarColumn(),
                                 TextColumn("{task.completed:.0f}/{task.total:.0f}"), TimeElapsedColumn(), console=console)
         self.progress = progress or None
 

@@ -103,9 +103,11 @@ def _angles(text: str) -> list[float]:
 
 def _progress_bar(description: str):
     """A rich progress bar and an ``advance(done, total, ...)`` callback for the stage functions."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 
-    bar = Progress(TextColumn(description), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+    from persival.log_progress import progress_bar
+
+    bar = progress_bar(TextColumn(description), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                    TextColumn("{task.fields[info]}"))
     task = bar.add_task(description, total=None, info="")
 

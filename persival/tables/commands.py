@@ -43,8 +43,9 @@ def register(app: typer.Typer) -> None:
         `persival simulate` and FE-arm campaigns answer from them.
         """
         from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 
+        from persival.log_progress import progress_bar
         from persival.model.arm_file import load_model_file
         from persival.tables.moment_table import TableMismatchError, check_grids
         from persival.tables.open import ensure_tables
@@ -59,7 +60,7 @@ def register(app: typer.Typer) -> None:
                     (out.is_file() or any(out.iterdir())):
                 raise TableMismatchError(f"{out} exists and is not a response table (no header.json); pick an empty folder")
             t0 = time.perf_counter()
-            bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+            bar = progress_bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                            console=console)
             with bar:
                 task = bar.add_task("meshing, rest states", total=None)
@@ -197,8 +198,9 @@ def _register_moments(app: typer.Typer) -> None:
         import time
 
         from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 
+        from persival.log_progress import progress_bar
         from persival.model.arm import ArmModel
         from persival.model.arm_file import load_model_file
         from persival.tables.moment_table import build_moment_table, check_grids, resumable
@@ -212,7 +214,8 @@ def _register_moments(app: typer.Typer) -> None:
             resumable(out, model_hash, profile, *grid)
             arm = ArmModel(model, profile)
         t0 = time.perf_counter()
-        bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), console=console)
+        bar = progress_bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                           console=console)
         with bar, user_errors():
             task = bar.add_task("moment table", total=5 * len(grid[1]))
             table = build_moment_table(arm, *grid, out=out, progress=lambda done, total, label: bar.update(
