@@ -17,7 +17,7 @@ from persival.campaign.store import CampaignStore
 from persival.evaluate.metrics import state_errors, summarize
 from persival.evaluate.surrogate_accuracy import accuracy_report, load_held_out, surrogate_errors
 from persival.surrogate.adaptive_campaign import run_adaptive_campaign
-from persival.surrogate.surface_surrogate import SurfaceSurrogate
+from persival.surrogate.sparse_grid_surrogate import SparseGridSurrogate
 
 SPEC = SimulatorSpec("analytic", {"mesh_size": 14.0})
 
@@ -27,7 +27,7 @@ def campaigns(tmp_path_factory):
     root = tmp_path_factory.mktemp("adaptive")
     run_campaign(root / "l1.zarr", Design.sparse_grid(1), SPEC, scheduler=INLINE, progress=False)
     run_campaign(root / "test.zarr", Design.random(40, seed=7), SPEC, scheduler=INLINE, progress=False)
-    SurfaceSurrogate("biceps").fit(root / "l1.zarr").save(root / "regular")
+    SparseGridSurrogate("biceps").fit(root / "l1.zarr").save(root / "regular")
     return root
 
 
@@ -122,7 +122,7 @@ def test_accuracy_command_writes_table_and_figure(campaigns, tmp_path):
 def test_surrogate_of_another_model_is_not_compared(campaigns, tmp_path):
     run_campaign(tmp_path / "coarse.zarr", Design.random(3, seed=1), SimulatorSpec("analytic", {"mesh_size": 20.0}),
                  scheduler=INLINE, progress=False)
-    surrogate = SurfaceSurrogate.load(campaigns / "regular")
+    surrogate = SparseGridSurrogate.load(campaigns / "regular")
     with pytest.raises(ValueError, match="not comparable"):
         surrogate_errors(surrogate, load_held_out(tmp_path / "coarse.zarr"))
 

@@ -5,12 +5,12 @@ import pytest
 
 from persival.surrogate.activation_model import AngleActivationModel
 from persival.surrogate.inverse import EFFORT_WEIGHT, InverseProblem
-from persival.surrogate.surface_surrogate import SurfaceSurrogate
+from persival.surrogate.sparse_grid_surrogate import SparseGridSurrogate
 
 
 @pytest.fixture(scope="module")
 def problem(small_run):
-    return InverseProblem(SurfaceSurrogate.load(small_run / "sg"))
+    return InverseProblem(SparseGridSurrogate.load(small_run / "sg"))
 
 
 def test_solutions_hit_the_target_and_beat_a_dense_random_search(problem):

@@ -29,15 +29,22 @@ FORMAT_NAME = "persival-export"
 FORMAT_VERSION = 1
 OPSET = 17
 FLOAT32_TOLERANCE_MM = 1e-4
+TIERS = ("float32", "float16", "int8")
+LOAD_INPUT = "load_kg"  # optional second input of a graph that solves the joint equilibrium
 
 
-def _onnx(module: torch.nn.Module, example: torch.Tensor, path: Path, input_name: str, output_names: list[str]) -> None:
-    axes = {input_name: {0: "batch"}, **{name: {0: "batch"} for name in output_names}}
+def _onnx(module: torch.nn.Module, example, path: Path, input_name, output_names: list[str]) -> None:
+    """Trace ``module`` to ONNX; ``example`` and ``input_name``: one tensor and name, or tuples of them."""
+    examples = example if isinstance(example, tuple) else (example,)
+    input_names = list(input_name) if isinstance(input_name, tuple) else [input_name]
+    # the optional load has its own batch size: its default (one row, 0 kg) broadcasts over any batch
+    axes = {**{name: {0: "load_batch" if name == LOAD_INPUT else "batch"} for name in input_names},
+            **{name: {0: "batch"} for name in output_names}}
     with warnings.catch_warnings():
         # The TorchScript exporter, on purpose: these graphs are plain dense layers, it needs no
         # onnxscript, and its output is what the tier checks below verify. It warns that it is legacy.
         warnings.simplefilter("ignore", DeprecationWarning)
-        torch.onnx.export(module.eval(), (example,), str(path), input_names=[input_name], output_names=output_names,
+        torch.onnx.export(module.eval(), examples, str(path), input_names=input_names, output_names=output_names,
                           dynamic_axes=axes, opset_version=OPSET, dynamo=False)
 
 
@@ -47,8 +54,21 @@ def _session(path: Path):
     return ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
 
 
-def _tiers(float32: Path) -> dict[str, Path]:
-    """float16 and int8 variants next to the float32 file."""
+def _optional_load_input(path: Path) -> None:
+    """Make the graph's ``load_kg`` input optional: an initializer of the same name (0 kg) is its
+    default, so a client that feeds ``activations`` only (the deployment contract) still runs it."""
+    import onnx
+    from onnx import numpy_helper
+
+    model = onnx.load(str(path))
+    model.graph.initializer.append(numpy_helper.from_array(np.zeros((1, 1), dtype=np.float32), name=LOAD_INPUT))
+    onnx.save(model, str(path))
+
+
+def _tiers(float32: Path, tiers=TIERS) -> dict[str, Path]:
+    """float16 and int8 variants next to the float32 file (those of ``tiers``)."""
+    if tuple(tiers) == ("float32",):
+        return {"float32": float32}
     import onnx
     from onnxconverter_common import float16
     from onnxruntime.quantization import QuantType, quantize_dynamic
@@ -69,13 +89,14 @@ def _tiers(float32: Path) -> dict[str, Path]:
             quantize_dynamic(str(float32), str(int8), weight_type=QuantType.QInt8, per_channel=True)
         finally:
             quantization_log.setLevel(level)
-    return {"float32": float32, "float16": half, "int8": int8}
+    return {tier: path for tier, path in {"float32": float32, "float16": half, "int8": int8}.items() if tier in tiers}
 
 
 def _check_tiers(files: dict[str, Path], graph, probe: np.ndarray, names: list[str]) -> dict:
     """Max |onnxruntime - torch| per tier and output, on the probe activations."""
     with torch.no_grad():
-        ref = graph(torch.as_tensor(probe, dtype=torch.float32))
+        inputs = (torch.as_tensor(probe, dtype=torch.float32),)
+        ref = graph(*inputs, torch.zeros(len(probe), 1)) if _takes_load(graph) else graph(*inputs)
     ref = [r.numpy() for r in (ref if isinstance(ref, tuple) else (ref,))]
     out = {}
     for tier, path in files.items():
@@ -88,6 +109,12 @@ def _check_tiers(files: dict[str, Path], graph, probe: np.ndarray, names: list[s
         raise RuntimeError(f"the float32 ONNX model differs from PyTorch by {worst:.2e} mm "
                            f"(tolerance {FLOAT32_TOLERANCE_MM:.0e})")
     return out
+
+
+def _takes_load(graph) -> bool:
+    import inspect
+
+    return LOAD_INPUT in inspect.signature(graph.forward).parameters
 
 
 def _export_activation_model(model, out: Path) -> dict:
@@ -115,14 +142,20 @@ def export_model(surrogate, out: str | Path, activation_model=None, motion_model
     tmp.mkdir(parents=True)
     graph = surrogate.deployable()
     names = ["positions", "elbow_angle_deg"] if surrogate.has_angle else ["positions"]
-    _onnx(graph, torch.full((2, 5), 0.5), tmp / "deformation.onnx", "activations", names)
+    takes_load = _takes_load(graph)
+    if takes_load:
+        _onnx(graph, (torch.full((2, 5), 0.5), torch.zeros(2, 1)), tmp / "deformation.onnx", ("activations", LOAD_INPUT), names)
+        _optional_load_input(tmp / "deformation.onnx")
+    else:
+        _onnx(graph, torch.full((2, 5), 0.5), tmp / "deformation.onnx", "activations", names)
     probe = np.random.default_rng(seed).uniform(0.0, 1.0, (n_probe, 5))
-    variants = _check_tiers(_tiers(tmp / "deformation.onnx"), graph, probe, names)
+    variants = _check_tiers(_tiers(tmp / "deformation.onnx", getattr(surrogate, "deploy_tiers", TIERS)), graph, probe, names)
     surfaces = surrogate.surfaces
     source = surrogate.metadata.get("source", {})
     n = surfaces.n_nodes
     outputs = {"positions": [None, n, 3], **({"elbow_angle_deg": [None, 1]} if surrogate.has_angle else {})}
-    models = {"deformation": {"inputs": {"activations": [None, 5]}, "outputs": outputs,
+    inputs = {"activations": [None, 5], **({LOAD_INPUT: [None, 1]} if takes_load else {})}
+    models = {"deformation": {"inputs": inputs, "optional_inputs": {LOAD_INPUT: 0.0} if takes_load else {}, "outputs": outputs,
                               "variants": variants, "architecture": surrogate.metadata.get("arch"),
                               "parameters": surrogate.metadata.get("parameters"), "accuracy": accuracy or {}}}
     if activation_model is not None:

@@ -82,7 +82,7 @@ class RunLayout:
 @dataclass
 class LoadedRun:
     layout: RunLayout
-    sg: object  # SurfaceSurrogate of all muscles
+    sg: object  # SparseGridSurrogate of all muscles
     networks: dict = field(default_factory=dict)  # label -> NetworkSurrogate
     activation_model: object | None = None
 

@@ -23,7 +23,7 @@ from persival.evaluate.metrics import state_errors, summarize
 from persival.figures import save_figure
 from persival.surrogate.dataset import describe_source
 from persival.surrogate.sparse_grid import SparseGrid
-from persival.surrogate.surface_surrogate import SurfaceSurrogate
+from persival.surrogate.sparse_grid_surrogate import SparseGridSurrogate
 
 __all__ = ["HeldOutStates", "load_held_out", "surrogate_errors", "refinement_path", "accuracy_report",
            "plot_accuracy"]
@@ -65,7 +65,7 @@ def _predict_errors(predict, test: HeldOutStates) -> dict[str, np.ndarray]:
     return errors
 
 
-def surrogate_errors(surrogate: SurfaceSurrogate, test: HeldOutStates) -> dict[str, np.ndarray]:
+def surrogate_errors(surrogate: SparseGridSurrogate, test: HeldOutStates) -> dict[str, np.ndarray]:
     """Per-state errors of one surrogate on the held-out states (same model required)."""
     if surrogate.metadata.get("model_hash") != test.model_hash:
         raise ValueError(
@@ -77,7 +77,7 @@ def surrogate_errors(surrogate: SurfaceSurrogate, test: HeldOutStates) -> dict[s
     return _predict_errors(surrogate.predict_with_angle, test)
 
 
-def refinement_path(surrogate: SurfaceSurrogate) -> list[tuple[int, SurfaceSurrogate]]:
+def refinement_path(surrogate: SparseGridSurrogate) -> list[tuple[int, SparseGridSurrogate]]:
     """(grid points, surrogate) after every refinement step of an adaptive surrogate ([] otherwise)."""
     sizes = surrogate.metadata.get("adaptive", {}).get("grid_points_per_step", [])
     grid = surrogate.grid
@@ -108,7 +108,7 @@ def accuracy_report(surrogates: dict[str, str | Path], test_store: str | Path) -
     ``states`` is the number of states a surrogate was fitted to (its grid points), ``source``
     what they are; ``test_source`` says what the held-out states are.
     """
-    loaded = {label: SurfaceSurrogate.load(path) for label, path in surrogates.items()}
+    loaded = {label: SparseGridSurrogate.load(path) for label, path in surrogates.items()}
     muscles = {s.muscle for s in loaded.values()}
     if len(muscles) != 1:
         raise ValueError(f"the surrogates interpolate different muscles: {sorted(muscles)}")

@@ -4,7 +4,7 @@
 supplies its ``simulate`` callback: every point it asks for is looked up among the done states
 already on disk (earlier steps, a resumed run, or seed stores such as a regular campaign of the
 same model), and only the points found nowhere go through the campaign runner, into one new
-store per step. The result is a :class:`SurfaceSurrogate` like the regular one, whose metadata
+store per step. The result is a :class:`SparseGridSurrogate` like the regular one, whose metadata
 records the refinement history (grid size after every step), so the accuracy stage can replay
 the error against the number of FE states without solving anything again.
 
@@ -26,7 +26,7 @@ from persival.campaign.design import Design
 from persival.campaign.simulator import SimulatorSpec, SurfaceTopology
 from persival.campaign.store import CampaignStore
 from persival.surrogate.adaptive import refine_adaptive
-from persival.surrogate.surface_surrogate import SurfaceSurrogate
+from persival.surrogate.sparse_grid_surrogate import SparseGridSurrogate
 
 __all__ = ["StatePool", "AdaptiveCampaignResult", "run_adaptive_campaign"]
 
@@ -91,7 +91,7 @@ class StatePool:
 
 @dataclass
 class AdaptiveCampaignResult:
-    surrogate: SurfaceSurrogate
+    surrogate: SparseGridSurrogate
     steps: list[dict]  # per refinement: grid size, points simulated, points reused, store
     simulated: int  # states solved by this run
     reused: int  # grid points found in the pool (earlier runs or seed stores)
@@ -177,7 +177,7 @@ def run_adaptive_campaign(
     )
     for step, n in zip(steps, np.cumsum([s["new_points"] for s in steps])):
         step["grid_points"] = int(n)
-    surrogate = SurfaceSurrogate(muscle, degree).fit_values(
+    surrogate = SparseGridSurrogate(muscle, degree).fit_values(
         result.grid, result.values[:, :-1].reshape(len(result.values), -1, 3), result.values[:, -1],
         pool.surface,
         {"store": [str(s) for s in pool.stores], "model_hash": pool.model_hash,

@@ -28,14 +28,14 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         from rich.console import Console
 
         from persival.campaign.store import StoreError
-        from persival.surrogate.surface_surrogate import SurfaceSurrogate
+        from persival.surrogate.sparse_grid_surrogate import SparseGridSurrogate
 
         console = Console()
         with user_errors(StoreError, out=out):
             check_output_dir(out)
             from persival.surrogate.stage import parse_muscles
 
-            surrogate = SurfaceSurrogate(parse_muscles(muscle), degree).fit(store)
+            surrogate = SparseGridSurrogate(parse_muscles(muscle), degree).fit(store)
             surrogate.save(out)
         meta = surrogate.metadata
         console.print(f"fitted level-{meta['level']} grid ({meta['grid_points']} points) to {surrogate.n_nodes} "

@@ -15,13 +15,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from persival.surrogate.base import Surrogate
 from persival.surrogate.dataset import Dataset, Surfaces
 from persival.surrogate.training import TrainingConfig, build_net, train
 
 __all__ = ["NetworkSurrogate"]
 
 
-class NetworkSurrogate:
+class NetworkSurrogate(Surrogate):
     kind = "network"
 
     def __init__(self, config: TrainingConfig | None = None) -> None:
@@ -52,11 +53,14 @@ class NetworkSurrogate:
 
     def deployable(self) -> torch.nn.Module:
         """alpha (b, 5) -> positions (b, N, 3) mm [, elbow angle (b, 1)]: the graph to export."""
-        if self.net is None:
-            raise RuntimeError("fit() or load() the surrogate first")
+        self._require_fit()
         if self._graph is None:
             self._graph = self.net.deployable(self.surfaces.reference_points).eval()
         return self._graph
+
+    @property
+    def fitted(self) -> bool:
+        return self.net is not None
 
     @property
     def has_angle(self) -> bool:
@@ -69,14 +73,11 @@ class NetworkSurrogate:
         x = torch.as_tensor(check_activations(activations), dtype=torch.float32)
         return self.deployable()(x)
 
-    def predict(self, activations) -> np.ndarray:
+    def predict_with_angle(self, activations) -> tuple[np.ndarray, np.ndarray | None]:
         out = self._run(activations)
-        return (out[0] if isinstance(out, tuple) else out).numpy().astype(np.float64)
-
-    def predict_angle(self, activations) -> np.ndarray:
-        if not self.has_angle:
-            raise ValueError("the paper network has no elbow-angle output")
-        return self._run(activations)[1][:, 0].numpy().astype(np.float64)
+        if not isinstance(out, tuple):
+            return out.numpy().astype(np.float64), None
+        return out[0].numpy().astype(np.float64), out[1][:, 0].numpy().astype(np.float64)
 
     @property
     def n_nodes(self) -> int:
@@ -89,7 +90,7 @@ class NetworkSurrogate:
                    path / "network.pt")
         self.surfaces.save(path / "surfaces.npz")
         (path / "history.json").write_text(json.dumps(self.history))
-        (path / "surrogate.json").write_text(json.dumps(self.metadata, indent=2, default=str))
+        self.write_manifest(path, self.metadata)
         return path
 
     @classmethod
@@ -101,7 +102,7 @@ class NetworkSurrogate:
         net.load_state_dict(blob["state"])
         surrogate.net = net.eval()
         surrogate.surfaces = Surfaces.load(path / "surfaces.npz")
-        surrogate.metadata = json.loads((path / "surrogate.json").read_text())
+        surrogate.metadata = cls.read_manifest(path)
         history = path / "history.json"
         surrogate.history = json.loads(history.read_text()) if history.exists() else []
         return surrogate

@@ -15,7 +15,7 @@ from persival.surrogate.activation_model import AngleActivationModel
 from persival.surrogate.base import load_surrogate
 from persival.surrogate.dataset import Dataset
 from persival.surrogate.inverse import InverseProblem, InverseSolution
-from persival.surrogate.surface_surrogate import SurfaceSurrogate
+from persival.surrogate.sparse_grid_surrogate import SparseGridSurrogate
 
 __all__ = ["parse_muscles", "fit_sparse_grid", "solve_inverse", "build_activation_model", "make_training_data",
            "train_network", "load_angle_surrogate"]
@@ -31,8 +31,8 @@ def parse_muscles(text: str | None):
     return names
 
 
-def fit_sparse_grid(store: str | Path, out: str | Path, muscles=None, degree: int = 3) -> SurfaceSurrogate:
-    surrogate = SurfaceSurrogate(muscles, degree).fit(store)
+def fit_sparse_grid(store: str | Path, out: str | Path, muscles=None, degree: int = 3) -> SparseGridSurrogate:
+    surrogate = SparseGridSurrogate(muscles, degree).fit(store)
     surrogate.save(out)
     return surrogate
 

@@ -13,17 +13,17 @@ same model (hash); there is nothing to train. Like every surrogate it answers ``
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
+from persival.surrogate.base import Surrogate
 from persival.surrogate.dataset import Dataset, Surfaces
 
 __all__ = ["ResponseTableSurrogate"]
 
 
-class ResponseTableSurrogate:
+class ResponseTableSurrogate(Surrogate):
     """Surfaces and elbow angle of the FE arm from its response tables (no FE solve per state).
 
     ``profile``, ``model_file``: the arm; ``tables``: the table folder (default: the one
@@ -81,10 +81,6 @@ class ResponseTableSurrogate:
         return self
 
     # ------------------------------------------------------------------ answers
-    def _require_fit(self) -> None:
-        if self.surfaces is None:
-            raise RuntimeError("ResponseTableSurrogate: call fit(dataset) (or load) first")
-
     def predict_with_angle(self, activations) -> tuple[np.ndarray, np.ndarray]:
         """Positions (m, N, 3) mm and elbow angles (m,) deg; activations (m, 5) or (5,)."""
         self._require_fit()
@@ -97,9 +93,6 @@ class ResponseTableSurrogate:
             positions[i] = np.concatenate([points[ids] + u[ids] for ids in self._node_ids])
         return positions, angles
 
-    def predict(self, activations) -> np.ndarray:
-        return self.predict_with_angle(activations)[0]
-
     def predict_angle(self, activations) -> np.ndarray:
         alpha = np.atleast_2d(np.asarray(activations, dtype=float))
         return np.array([self.solver.start_angle(a) for a in alpha])
@@ -110,15 +103,14 @@ class ResponseTableSurrogate:
         path = Path(path)
         path.mkdir(parents=True, exist_ok=True)
         self.surfaces.save(path / "surfaces.npz")
-        (path / "surrogate.json").write_text(json.dumps({
-            "kind": self.kind, "profile": self.profile, "model_file": self.model_file, "tables": self.tables,
-            "metadata": self.metadata}, indent=2))
+        self.write_manifest(path, {"profile": self.profile, "model_file": self.model_file, "tables": self.tables,
+                                   "metadata": self.metadata})
         return path
 
     @classmethod
     def load(cls, path: str | Path) -> ResponseTableSurrogate:
         path = Path(path)
-        meta = json.loads((path / "surrogate.json").read_text())
+        meta = cls.read_manifest(path)
         surrogate = cls(meta["profile"], meta.get("model_file"), meta.get("tables"))
         surfaces = Surfaces.load(path / "surfaces.npz")
         source = meta["metadata"].get("source", {})

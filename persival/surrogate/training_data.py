@@ -45,7 +45,7 @@ def sample_inputs(activation_model, n_samples: int, angle_fraction: float, seed:
 
 def generate_training_data(sg, activation_model, out: str | Path, n_samples: int = 4000,
                            angle_fraction: float = 0.5, seed: int = 0, chunk: int = 256, progress=None) -> Path:
-    """Write the training set of ``sg`` (a fitted :class:`SurfaceSurrogate`) to ``out``."""
+    """Write the training set of ``sg`` (a fitted :class:`SparseGridSurrogate`) to ``out``."""
     out = Path(out)
     alpha, targets = sample_inputs(activation_model, n_samples, angle_fraction, seed)
     config = {"n_samples": n_samples, "angle_fraction": angle_fraction, "seed": seed, "chunk": chunk,

@@ -23,6 +23,7 @@ A folder of another model, profile, mesh or grid is refused with a message namin
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import time
@@ -46,13 +47,18 @@ VERSION = 3  # 3: moments and du/dtheta (contact with the bones); 2: tension, st
 # equilibrium lies off the table is solved directly, at about 20 times the cost
 DEFAULT_ANGLES = tuple(float(a) for a in np.arange(-10.0, 185.0 + 1e-9, 5.0))
 # the levels of a level-2 sparse grid (and, every other one, of level 1): its states need no
-# continuation in a, only the re-solve at the equilibrium angle
-DEFAULT_LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0)
+# continuation in a, only the re-solve at the equilibrium angle; and below 0.25 four more, where
+# a flexor goes from hanging slack to taut and its moment is far from linear in a (the biceps at
+# 80 to 100 deg and a = 0.02 to 0.15: cubic interpolation over 0, 0.25, 0.5 missed its moment by
+# 200 to 370 N mm, moving the elbow angle by up to 4.6 deg; docs/fe_tables.md)
+DEFAULT_LEVELS = (0.0, 0.03125, 0.0625, 0.125, 0.1875, 0.25, 0.5, 0.75, 1.0)
 
 
 def default_table_dir(arm) -> Path:
-    """Where the tables of this model and mesh live by default: beside its cached rest state."""
-    return arm.cache_dir() / f"response_table-v{VERSION}"
+    """Where the tables of this model and mesh live by default: beside its cached rest state, in a
+    folder named after the default grid (a changed default grid starts a new table)."""
+    grid = hashlib.sha256(json.dumps([DEFAULT_ANGLES, DEFAULT_LEVELS]).encode()).hexdigest()[:8]
+    return arm.cache_dir() / f"response_table-v{VERSION}-{grid}"
 
 
 @dataclass

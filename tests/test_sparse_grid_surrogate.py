@@ -6,7 +6,7 @@ import pytest
 from persival.campaign.design import Design
 from persival.campaign.runner import INLINE, run_campaign
 from persival.campaign.simulator import SimulatorSpec, make_simulator
-from persival.surrogate.surface_surrogate import SurfaceSurrogate
+from persival.surrogate.sparse_grid_surrogate import SparseGridSurrogate
 
 
 @pytest.fixture(scope="module")
@@ -19,7 +19,7 @@ def store(tmp_path_factory):
 def test_interpolates_the_stored_states_and_generalizes(store, tmp_path):
     from persival.campaign.store import CampaignStore
 
-    surrogate = SurfaceSurrogate("biceps").fit(store)
+    surrogate = SparseGridSurrogate("biceps").fit(store)
     with CampaignStore.open(store) as s:
         alpha = s.design.points
         stored, angles = s.surface_positions("biceps"), s.elbow_angles()
@@ -49,19 +49,19 @@ def test_interpolates_the_stored_states_and_generalizes(store, tmp_path):
         assert np.allclose((xp - xm) / (2 * h), dx[..., k], atol=1e-5)
         assert np.allclose((tp - tm) / (2 * h), dtheta[:, k], atol=1e-5)
 
-    loaded = SurfaceSurrogate.load(surrogate.save(tmp_path / "sg"))
+    loaded = SparseGridSurrogate.load(surrogate.save(tmp_path / "sg"))
     assert np.array_equal(loaded.predict(a), surrogate.predict(a))
     assert loaded.triangles.shape == surrogate.triangles.shape
 
 
 def test_bad_input(store):
     with pytest.raises(ValueError, match="no surface 'deltoid'"):
-        SurfaceSurrogate("deltoid").fit(store)
-    surrogate = SurfaceSurrogate().fit(store)
+        SparseGridSurrogate("deltoid").fit(store)
+    surrogate = SparseGridSurrogate().fit(store)
     with pytest.raises(ValueError):
         surrogate.predict([[0.5, 0.5, 0.5, 0.5, 1.5]])
     with pytest.raises(RuntimeError, match="fit"):
-        SurfaceSurrogate().predict([[0.5] * 5])
+        SparseGridSurrogate().predict([[0.5] * 5])
 
 
 def test_all_muscles_in_one_grid_and_the_angle_column(store, tmp_path):
@@ -71,8 +71,8 @@ def test_all_muscles_in_one_grid_and_the_angle_column(store, tmp_path):
     data = Dataset.from_store(store)
     assert data.surfaces.names == ("biceps", "brachialis", "brachioradialis", "triceps", "anconeus")
     assert data.source["simulator"] == "analytic" and data.source["states"] == 243
-    surrogate = SurfaceSurrogate(None).fit(data)
-    biceps = SurfaceSurrogate("biceps").fit(store)
+    surrogate = SparseGridSurrogate(None).fit(data)
+    biceps = SparseGridSurrogate("biceps").fit(store)
     a = np.random.default_rng(3).uniform(0, 1, (4, 5))
     # the biceps block of the five-muscle fit is the biceps-only fit (same grid, same LU)
     np.testing.assert_allclose(surrogate.predict(a)[:, data.surfaces.nodes_of("biceps")], biceps.predict(a), atol=1e-9)

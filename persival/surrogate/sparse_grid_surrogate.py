@@ -9,11 +9,11 @@ with respect to the activations for the inverse problem.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
+from persival.surrogate.base import Surrogate
 from persival.surrogate.dataset import Dataset, Surfaces
 from persival.surrogate.sparse_grid import SparseGrid
 
@@ -26,7 +26,7 @@ def _as_surfaces(surface) -> Surfaces:
     return Surfaces.from_topologies([surface])
 
 
-class SurfaceSurrogate:
+class SparseGridSurrogate(Surrogate):
     """``fit(dataset or store)``, then ``predict(alpha) -> positions (m, N, 3)``, ``predict_angle``.
 
     ``muscles``: one name, several, or None for every surface of the campaign.
@@ -65,7 +65,7 @@ class SurfaceSurrogate:
             "(use a complete sparse-grid design: persival campaign run --design sparse-grid --level L)"
         )
 
-    def fit(self, data) -> SurfaceSurrogate:
+    def fit(self, data) -> SparseGridSurrogate:
         """``data``: a :class:`Dataset` or the path of a finished sparse-grid campaign store."""
         if not isinstance(data, Dataset):
             from persival.campaign.store import CampaignStore
@@ -80,7 +80,7 @@ class SurfaceSurrogate:
         order = np.argsort(grid.locate(data.activations))  # dataset rows in grid order
         return self.fit_values(grid, data.positions[order], data.elbow_angles[order], data.surfaces, data.source)
 
-    def fit_values(self, grid: SparseGrid, positions, angles, surface, metadata: dict | None = None) -> SurfaceSurrogate:
+    def fit_values(self, grid: SparseGrid, positions, angles, surface, metadata: dict | None = None) -> SparseGridSurrogate:
         """Fit to values at the points of any grid (regular or adaptive), given in ``grid.points`` order.
 
         ``positions`` (N, n_nodes, 3) mm, ``angles`` (N,) deg, ``surface`` the surfaces: a
@@ -115,9 +115,9 @@ class SurfaceSurrogate:
     def triangles(self) -> np.ndarray:
         return self.surfaces.triangles
 
-    def _require_fit(self) -> None:
-        if self.grid is None:
-            raise RuntimeError("fit() or load() the surrogate first")
+    @property
+    def fitted(self) -> bool:
+        return self.grid is not None
 
     def predict_with_angle(self, activations, dtype=np.float64) -> tuple[np.ndarray, np.ndarray]:
         """Surface positions (m, N, 3) in mm and elbow angles (m,) in degrees (one matrix product)."""
@@ -157,13 +157,13 @@ class SurfaceSurrogate:
         path.mkdir(parents=True, exist_ok=True)
         self.grid.save(path / "sparse_grid.npz")
         self.surfaces.save(path / "surfaces.npz")
-        (path / "surrogate.json").write_text(json.dumps(self.metadata, indent=2, default=str))
+        self.write_manifest(path, self.metadata)
         return path
 
     @classmethod
-    def load(cls, path: str | Path) -> SurfaceSurrogate:
+    def load(cls, path: str | Path) -> SparseGridSurrogate:
         path = Path(path)
-        metadata = json.loads((path / "surrogate.json").read_text())
+        metadata = cls.read_manifest(path)
         surrogate = cls(metadata.get("muscles", metadata["muscle"]), metadata["degree"])
         surrogate.grid = SparseGrid.load(path / "sparse_grid.npz")
         surrogate.surfaces = Surfaces.load(path / "surfaces.npz")

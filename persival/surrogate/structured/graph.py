@@ -1,0 +1,110 @@
+"""The structured surrogate as one PyTorch graph, exportable to ONNX with its root search inside.
+
+``activations`` (b, 5) and ``load_kg`` (b, 1) -> ``positions`` (b, N, 3) mm and
+``elbow_angle_deg`` (b, 1). The same arithmetic as the numpy reference
+(:class:`~persival.surrogate.structured.moment_model.MomentModel`, :class:`MuscleShape`), written
+with dense products, comparisons and one-hot selections only (no gathers, no loops that depend on
+the data), and with few operators, since at batch 1 each costs about a microsecond: a sign scan
+brackets the stable root nearest the hanging arm, the bracket's table interval gives the
+balance as one cubic, and regula falsi plus a fixed number of Newton steps on that cubic
+converge it; every muscle's surface is then read at that angle (docs/theory.md, "Structured
+surrogate").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from persival.surrogate.structured.cardinal import torch_weights
+from persival.surrogate.structured.moment_model import NEWTON_STEPS
+
+__all__ = ["StructuredGraph"]
+
+_FAR = 1e9  # distance of a scan interval without a stable root
+
+
+class StructuredGraph(torch.nn.Module):
+    def __init__(self, moments, shapes, dtype=torch.float32):
+        super().__init__()
+        as_t = lambda a: torch.as_tensor(np.asarray(a), dtype=dtype)  # noqa: E731
+        basis = moments.theta_basis
+        n_t2, n_a = moments.data.shape[1], len(moments.levels)
+        n_int = len(basis.breaks) - 1
+        self.n_levels, self.n_t2 = n_a, n_t2
+        self.activation_tables = moments.activation_basis.torch_tables(dtype)
+        self.moment_rows = as_t(np.transpose(moments.data, (0, 2, 1)).reshape(5 * n_a, n_t2))
+        self.external_row, self.load_row = as_t(moments.external_data[None]), as_t(moments.load_data[None])
+        # the sign scan
+        grid = moments.scan_deg
+        self.scan_weights = as_t(basis.weights(grid).T)  # (2 n_t, n_g)
+        self.scan_lo, self.scan_hi = as_t(grid[:-1, None]), as_t(grid[1:, None])
+        self.scan_distance = as_t(np.abs(grid[:-1] - moments.near_deg))
+        self.scan_index = as_t(np.arange(len(grid) - 1))
+        self.scan_interval = as_t(np.eye(n_int)[moments.scan_interval])  # (n_g - 1, n_int) one-hot
+        # per table interval: its start and the power-form rows (t^3, t^2, t, 1) of the theta weights
+        self.interval_start = as_t(basis.breaks[:-1, None])
+        self.interval_rows = as_t(np.transpose(basis.coefficients, (1, 0, 2)).reshape(n_int, 4 * n_t2))
+        self.weight_rows = as_t(basis.coefficients.reshape(4 * n_int, n_t2))  # power-major, as torch_weights
+        # shapes: every muscle's coefficient data side by side, (2 n_t, n_a * R)
+        data = np.concatenate([s.coefficient_data for s in shapes], axis=2)
+        self.coefficient_rows = as_t(data.reshape(n_t2, -1))
+        counts = [s.modes.shape[0] for s in shapes]
+        expand = np.zeros((5, sum(counts)))
+        ends = np.cumsum(counts)
+        for s, end, r in zip(shapes, ends, counts):
+            expand[s.muscle_index, end - r:end] = 1.0
+        self.expand = as_t(expand)  # (5, R): which muscle's activation weighs each coefficient
+        self.slices = [(int(end - r), int(end)) for end, r in zip(ends, counts)]
+        self.n_coefficients = int(sum(counts))
+        self.node_counts = [s.n_nodes for s in shapes]
+        self.modes = [as_t(s.modes) for s in shapes]
+        self.offsets = [as_t(s.mean.reshape(-1, 3) - s.origin) for s in shapes]
+        self.origins = [as_t(s.origin) for s in shapes]
+        # Q(theta)^T entries of every muscle: (2 n_t, 9 n_m)
+        self.rotation_rows = as_t(np.concatenate([s.rotation_data.reshape(-1, 3, 3).transpose(0, 2, 1).reshape(-1, 9)
+                                                  for s in shapes], axis=1))
+
+    def _bracket(self, g):
+        """One-hot (b, n_g - 1) of the scan interval holding the stable root nearest the hanging
+        arm; without one, the first interval (extends everywhere) or the last (flexes everywhere)."""
+        down = (g[:, :-1] > 0) & (g[:, 1:] <= 0)
+        fallback = _FAR + torch.where(g[:, :1] > 0, -self.scan_index, self.scan_index)
+        k = torch.argmin(torch.where(down, self.scan_distance, fallback), dim=1, keepdim=True)
+        return (self.scan_index == k).to(g.dtype)
+
+    def _angle(self, profile):
+        """Elbow angle (b, 1) and the one-hot (b, n_int) of its table interval."""
+        g = profile @ self.scan_weights
+        pick = self._bracket(g)
+        lo, hi = pick @ self.scan_lo, pick @ self.scan_hi
+        g_lo = (pick * g[:, :-1]).sum(1, keepdim=True)
+        g_hi = (pick * g[:, 1:]).sum(1, keepdim=True)
+        interval = pick @ self.scan_interval
+        start = interval @ self.interval_start
+        a3, a2, a1, a0 = ((interval @ self.interval_rows).reshape(-1, 4, self.n_t2) * profile[:, None, :]).sum(2).split(1, 1)
+        falls = g_lo > g_hi
+        theta = torch.where(falls, lo + (hi - lo) * g_lo / torch.where(falls, g_lo - g_hi, 1.0), torch.where(g_lo > 0, hi, lo))
+        b3, b2 = 3 * a3, 2 * a2
+        for _ in range(NEWTON_STEPS):
+            t = theta - start
+            value, slope = ((a3 * t + a2) * t + a1) * t + a0, (b3 * t + b2) * t + a1
+            descends = slope < 0
+            step = torch.where(descends, value / torch.where(descends, slope, -1.0), 0.0)
+            theta = torch.minimum(torch.maximum(theta - step, lo), hi)
+        return theta, interval, theta - start
+
+    def forward(self, activations, load_kg):
+        # every reshape keeps the batch as -1 and names the other sizes: no Shape operators in the graph
+        act_w = torch_weights(self.activation_tables, activations.reshape(-1, 1))  # (5 b, n_a)
+        profile = act_w.reshape(-1, 5 * self.n_levels) @ self.moment_rows + self.external_row + load_kg * self.load_row
+        theta, interval, t = self._angle(profile)
+        t2 = t * t
+        w = torch.cat([interval * (t2 * t), interval * t2, interval * t, interval], dim=1) @ self.weight_rows  # (b, 2 n_t)
+        by_level = act_w.reshape(-1, 5, self.n_levels).transpose(1, 2) @ self.expand  # (b, n_a, R)
+        coefficients = ((w @ self.coefficient_rows).reshape(-1, self.n_levels, self.n_coefficients) * by_level).sum(1)
+        rotations = (w @ self.rotation_rows).reshape(-1, len(self.modes), 3, 3)
+        surfaces = [((coefficients[:, lo:hi] @ modes).reshape(-1, n, 3) + offset) @ rotations[:, i] + origin
+                    for i, ((lo, hi), n, modes, offset, origin) in enumerate(zip(self.slices, self.node_counts, self.modes,
+                                                                                  self.offsets, self.origins))]
+        return torch.cat(surfaces, dim=1), theta
