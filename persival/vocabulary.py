@@ -1,7 +1,7 @@
 """The words every stage shares: the muscles and their order, the activation check, the units.
 
 One module at the bottom of the package, imported by every stage, so that the order of the
-activation vector (SPEC section 1) and what counts as a valid one are defined exactly once.
+activation vector (docs/theory.md, introduction) and what counts as a valid one are defined exactly once.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import numpy as np
 __all__ = ["MUSCLES", "N_ACTIVATIONS", "ABBREVIATIONS", "ELBOW_ANGLE_BOUNDS_DEG", "UNITS", "check_activations",
            "check_activation_vector", "check_muscle_names"]
 
-#: The five muscles, in the order of every activation vector (SPEC section 1).
+#: The five muscles, in the order of every activation vector (docs/theory.md, introduction).
 MUSCLES = ("biceps", "brachialis", "brachioradialis", "triceps", "anconeus")
 N_ACTIVATIONS = len(MUSCLES)
 #: Three-letter column labels of the same order, for tables

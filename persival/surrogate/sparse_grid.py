@@ -1,4 +1,4 @@
-"""Hierarchical B-spline sparse-grid interpolation with SG++'s boundary basis (SPEC section 4).
+"""Hierarchical B-spline sparse-grid interpolation with SG++'s boundary basis (docs/theory.md, section 5).
 
 The grid, the basis and therefore the interpolant are those of SG++'s
 ``Grid.createBsplineBoundaryGrid(d, p, 1)`` with ``regular(n)``; the fixture
@@ -93,7 +93,7 @@ def _eval_pieces(y: np.ndarray, p: int, table: np.ndarray, left: np.ndarray | No
 
 
 def cardinal_bspline(y: np.ndarray, p: int) -> np.ndarray:
-    """Cardinal B-spline b^p (support [0, p+1]) at y, vectorized (SPEC section 4)."""
+    """Cardinal B-spline b^p (support [0, p+1]) at y, vectorized (docs/theory.md, 5.1)."""
     return _eval_pieces(np.asarray(y, dtype=np.float64), p, _piece_coefficients(p)[0])
 
 
@@ -132,7 +132,7 @@ def _check_levels_indices(levels: np.ndarray, indices: np.ndarray) -> None:
 # The grid
 # --------------------------------------------------------------------------------------------
 class SparseGrid:
-    """B-spline sparse grid with SG++'s boundary basis (SPEC section 4).
+    """B-spline sparse grid with SG++'s boundary basis (docs/theory.md, section 5).
 
     Parameters
     ----------
@@ -238,7 +238,7 @@ class SparseGrid:
     def _table(self, x: np.ndarray, derivative: bool = False) -> np.ndarray:
         """1-D basis values phi_u(x_t) for every point, dim and distinct 1-D function u.
 
-        phi_{l,i}(x) = b^p(x / h_l + (p+1)/2 - i), h_l = 2^-l, h_0 = 1 (SPEC section 4).
+        phi_{l,i}(x) = b^p(x / h_l + (p+1)/2 - i), h_l = 2^-l, h_0 = 1 (docs/theory.md, 5.1).
         Returns (m, dim * n_u), flattened so a grid point's factor is a plain column take.
         """
         y = x[:, :, None] * self._u_scale + self._u_shift
@@ -297,7 +297,7 @@ class SparseGrid:
 
     # ---------------------------------------------------------------- fitting
     def interpolation_matrix(self, sparse: bool = False):
-        """A[r, j] = phi_j(x_r) over the grid points (B-splines are not nodal, SPEC section 4).
+        """A[r, j] = phi_j(x_r) over the grid points (B-splines are not nodal, docs/theory.md, 5.3).
 
         Dense (N, N) by default; ``sparse=True`` builds a CSC matrix row block by row block so
         that large grids never hold the dense matrix.
