@@ -59,7 +59,11 @@ class Design:
     @classmethod
     def sparse_grid(cls, level: int, degree: int = 3) -> Design:
         """The points of the regular B-spline boundary sparse grid (docs/theory.md, 5.2), in the
-        surrogate's point order (``degree`` is recorded only: the points do not depend on it)."""
+        surrogate's point order (``degree`` is recorded only: the points do not depend on it).
+
+        >>> len(Design.sparse_grid(1)), len(Design.sparse_grid(2))
+        (243, 1053)
+        """
         if isinstance(level, bool) or not isinstance(level, (int, np.integer)) or level < 1:
             raise DesignError(f"sparse-grid level must be an integer >= 1, got {level!r}")
         points = level_index_points(*regular_levels_indices(N_ACTIVATIONS, int(level)))
