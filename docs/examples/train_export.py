@@ -3,7 +3,7 @@
 The network learns the states of a level-1 campaign of the analytic stand-in directly (the main
 job trains on 4000 sparse-grid states instead, `persival data` + `persival train`), for a few
 epochs, then the export writes three ONNX tiers and metadata.json; onnxruntime runs the float32
-tier as a viewer or the server would.
+tier as the server does (`persival.deploy.artifacts.DeployedModel`).
 
     python docs/examples/train_export.py [OUT]
 
@@ -16,11 +16,11 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-import onnxruntime as ort
 
 from persival.campaign.design import Design
 from persival.campaign.runner import INLINE, run_campaign
 from persival.campaign.simulator import SimulatorSpec
+from persival.deploy.artifacts import DeployedModel
 from persival.deploy.export import export_model
 from persival.surrogate.dataset import Dataset
 from persival.surrogate.network_surrogate import NetworkSurrogate
@@ -33,10 +33,9 @@ data = Dataset.from_store(out / "campaign.zarr")
 net = NetworkSurrogate(TrainingConfig(arch="pod", folds=1, epochs=15)).fit(data, out / "pod")
 export_model(net, out / "export")
 
-alpha = np.random.default_rng(0).uniform(0.0, 1.0, (8, 5)).astype(np.float32)
+alpha = np.random.default_rng(0).uniform(0.0, 1.0, (8, 5))
 onnx_file = out / "export" / "deformation.onnx"
-session = ort.InferenceSession(str(onnx_file), providers=["CPUExecutionProvider"])
-positions = session.run(["positions"], {"activations": alpha})[0]  # (8, nodes, 3) mm
+positions, angles = DeployedModel(out / "export").predict(alpha)  # onnxruntime, float32 tier: (8, nodes, 3) mm
 print(f"POD rank {net.net.config['rank']}, {onnx_file.stat().st_size / 1e6:.2f} MB float32, "
       f"best validation loss {net.metadata['training']['best']['val_loss']:.3g} mm^2")
 fit_error = np.linalg.norm(net.predict(data.activations) - data.positions, axis=2).mean()
