@@ -1,4 +1,4 @@
-"""Points of SG++'s regular boundary sparse grid (SPEC section 4), without the B-spline basis.
+"""Points of SG++'s regular boundary sparse grid (docs/theory.md, 5.2), without the B-spline basis.
 
 Two stages need them: a campaign solves the FE model at these points (persival.campaign.design)
 and the surrogate interpolates there (persival.surrogate.sparse_grid). The enumeration lives
@@ -16,7 +16,7 @@ def _regular_level_vectors(dim: int, n: int) -> list[tuple[int, ...]]:
     """Level vectors of SG++'s regular boundary grid: sum_t max(l_t, 1) <= n + dim - 1.
 
     Boundary level 0 counts as 1 (SG++'s ``boundaryLevel = 1``), so the boundary points ride
-    along with every subspace whose level is 1 in that direction (SPEC section 4).
+    along with every subspace whose level is 1 in that direction (docs/theory.md, 5.2).
     Recursive enumeration instead of a product over (n+1)^dim candidates keeps large dim cheap.
     """
     out: list[tuple[int, ...]] = []

@@ -9,7 +9,7 @@
     7 motion    OUT/motion/    (angle, velocity, acceleration, load) -> alpha, from the FE moments
     8 data      OUT/data/      SG training data (alpha_opt(Theta) and random alpha)
     9 train     OUT/networks/  pod/ (all muscles) and paper/ (the paper's net, biceps)
-   10 export    OUT/export/    ONNX models + metadata.json (SPEC 9)
+   10 export    OUT/export/    ONNX models + metadata.json (docs/deployment.md)
    11 evaluate  OUT/evaluate/  the paper's tables and figures
    12 report    OUT/report/    index.html + results.json
 

@@ -54,7 +54,7 @@ ARM_STATES = {"hanging": (0.0, 0.0, 0.0, 0.0, 0.0), "biceps_half": (0.5, 0.0, 0.
 
 
 def tables(out: Path, config, console) -> dict:
-    """The FE arm's per-muscle response tables (SPEC 8): built once per model and mesh in the
+    """The FE arm's per-muscle response tables (docs/theory.md, section 4): built once per model and mesh in the
     state cache, reused by every later run; their moments go to OUT/tables/moments.npz."""
     if config.simulator != "arm":
         why = "the campaign runs the analytic stand-in"

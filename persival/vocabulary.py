@@ -1,7 +1,7 @@
 """The words every stage shares: the muscles and their order, the activation check, the units.
 
 One module at the bottom of the package, imported by every stage, so that the order of the
-activation vector (SPEC section 1) and what counts as a valid one are defined exactly once.
+activation vector (docs/theory.md, introduction) and what counts as a valid one are defined exactly once.
 """
 
 from __future__ import annotations
@@ -11,7 +11,8 @@ import numpy as np
 __all__ = ["MUSCLES", "N_ACTIVATIONS", "ABBREVIATIONS", "ELBOW_ANGLE_BOUNDS_DEG", "UNITS", "check_activations",
            "check_activation_vector", "check_muscle_names"]
 
-#: The five muscles, in the order of every activation vector (SPEC section 1).
+#: The five muscles, in the order of every activation vector (docs/theory.md, introduction):
+#: ``MUSCLES.index("triceps") == 3``.
 MUSCLES = ("biceps", "brachialis", "brachioradialis", "triceps", "anconeus")
 N_ACTIVATIONS = len(MUSCLES)
 #: Three-letter column labels of the same order, for tables
@@ -28,6 +29,13 @@ def check_activations(activations, what: str = "activations") -> np.ndarray:
 
     Accepts one vector (5,) or a batch (n, 5); each must be finite and lie in [0, 1]^5. The
     message names the first offending row and muscle, so that a long design file is easy to fix.
+
+    >>> check_activations([0.5, 0, 0, 0, 0]).shape
+    (1, 5)
+    >>> check_activations([[0.2, 0, 0, 1.5, 0]])
+    Traceback (most recent call last):
+    ...
+    ValueError: activations: 1 row(s) lie outside [0, 1]^5, first: row 0, triceps = 1.5
     """
     try:
         arr = np.array(activations, dtype=np.float64)
@@ -55,7 +63,11 @@ def check_activations(activations, what: str = "activations") -> np.ndarray:
 
 def check_muscle_names(names, what: str = "muscles") -> tuple[str, ...]:
     """A choice of muscles, in vocabulary order: None for all of them, or names as a sequence or a
-    comma-separated string ("biceps, triceps"); ValueError for an empty choice or an unknown name."""
+    comma-separated string ("biceps, triceps"); ValueError for an empty choice or an unknown name.
+
+    >>> check_muscle_names("triceps, biceps")
+    ('biceps', 'triceps')
+    """
     if names is None:
         return MUSCLES
     chosen = [n.strip() for n in names.split(",")] if isinstance(names, str) else list(names)

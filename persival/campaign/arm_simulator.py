@@ -44,7 +44,7 @@ METHODS = ("tables", "direct", "interpolate")
 class ArmSimulator:
     """Simulator protocol of persival.campaign over :class:`ArmModel` (warm starts: ArmState).
 
-    ``method``: "tables" (default; SPEC 8 route): the exact FE state from the per-muscle
+    ``method``: "tables" (default; docs/theory.md, 4.3): the exact FE state from the per-muscle
     response tables (persival.tables.table_solve), which must be built first
     (``persival tables``, or :func:`ensure_tables`); a retry falls back to the direct solve.
     "direct": the coupled solve continued from the hanging arm or a neighbour.

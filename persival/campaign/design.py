@@ -1,7 +1,7 @@
 """Designs: the activation vectors a campaign solves, with stable ids, and their solve order.
 
 A design is validated once, when it is made: every point is five finite numbers in [0, 1]
-(SPEC section 10), ids are unique non-negative integers. ``solve_order`` then lays the points
+(the activation check of persival.vocabulary), ids are unique non-negative integers. ``solve_order`` then lays the points
 along a short path through [0, 1]^5 so that consecutive states are neighbours and a simulator
 can warm-start each solve from the previous one; ``chunks`` cuts that path into contiguous
 pieces, one per worker at a time.
@@ -58,8 +58,12 @@ class Design:
     # ---- constructors ------------------------------------------------------------------------
     @classmethod
     def sparse_grid(cls, level: int, degree: int = 3) -> Design:
-        """The points of the regular B-spline boundary sparse grid (SPEC section 4), in the
-        surrogate's point order (``degree`` is recorded only: the points do not depend on it)."""
+        """The points of the regular B-spline boundary sparse grid (docs/theory.md, 5.2), in the
+        surrogate's point order (``degree`` is recorded only: the points do not depend on it).
+
+        >>> len(Design.sparse_grid(1)), len(Design.sparse_grid(2))
+        (243, 1053)
+        """
         if isinstance(level, bool) or not isinstance(level, (int, np.integer)) or level < 1:
             raise DesignError(f"sparse-grid level must be an integer >= 1, got {level!r}")
         points = level_index_points(*regular_levels_indices(N_ACTIVATIONS, int(level)))

@@ -1,4 +1,4 @@
-"""The rigid bones of a simulator's model, for display (the export's ``skeleton``, SPEC 9).
+"""The rigid bones of a simulator's model, for display (the export's ``skeleton``, docs/deployment.md).
 
 A campaign store keeps muscle surfaces only; a viewer also wants the humerus fixed and the
 forearm bones turning about the elbow hinge. This module describes them per simulator kind:

@@ -51,7 +51,7 @@ def _register_export(app: typer.Typer) -> None:
         out: Path = typer.Option(..., "--out", help="Export folder (ONNX tiers + metadata.json); replaced if it exists."),
         activation_model: Path = typer.Option(None, "--activation-model", help="activation_model.json (persival inverse --out)."),
     ) -> None:
-        """Export a trained network to ONNX (float32, float16, int8) with metadata.json (SPEC 9)."""
+        """Export a trained network to ONNX (float32, float16, int8) with metadata.json (docs/deployment.md)."""
         from persival.cli_errors import check_output_dir, user_errors
         from persival.deploy.export import export_model
         from persival.surrogate.activation_model import AngleActivationModel

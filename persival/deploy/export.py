@@ -1,4 +1,4 @@
-"""The portable export of SPEC 9 (layout and contract: docs/deployment.md).
+"""The portable export (docs/theory.md, 7.6; layout and contract: docs/deployment.md).
 
 ``export_model(surrogate, out, activation_model=...)`` writes the deformation network as ONNX
 in three tiers (float32; float16 weights with float32 inputs and outputs; dynamic int8

@@ -1,4 +1,4 @@
-"""SPEC 7 accuracy tables of the networks: in-training, random activations, random angles.
+"""The accuracy tables (docs/theory.md, 8.2) of the networks: in-training, random activations, random angles.
 
 Every comparison is one (network, scope) pair: the paper net on the biceps (as in the paper),
 the POD net on all five muscles and on the biceps alone. Metrics come from
@@ -29,7 +29,7 @@ ACCURACY_COLUMNS = [
     ("mean MAE_mm", "MAE mm (mean)", "{:.3f}"), ("mean MRE_pct", "MRE % (mean)", "{:.3f}"),
     ("max MAE_mm", "MAE mm (worst state)", "{:.3f}"), ("max angle_error_deg", "angle err deg (worst)", "{:.3f}"),
 ]
-_MEAN_NOTE = ("The paper's 'mean error' column is placed under our mean over states (SPEC 7); its text calls the "
+_MEAN_NOTE = ("The paper's 'mean error' column is placed under our mean over states (docs/theory.md, 8.1); its text calls the "
               "same column 'the highest MAE across all configurations', which is our 'worst state' MAE column.")
 
 

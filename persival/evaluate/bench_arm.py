@@ -1,4 +1,4 @@
-"""FE arm at campaign scale (SPEC 8, issue 17): response tables, seconds per state, a campaign.
+"""FE arm at campaign scale (docs/theory.md, section 4): response tables, seconds per state, a campaign.
 
 Measured in one run on this machine: the response tables (built or finished now, plus the
 compute time of every column from their files), the exact path (FE state from the tables) and
@@ -105,7 +105,7 @@ def print_arm_benchmark(result: dict) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    t = Table(title=f"FE arm from response tables ({result['profile']} profile; targets: SPEC 8)")
+    t = Table(title=f"FE arm from response tables ({result['profile']} profile; targets: docs/benchmarks.md)")
     t.add_column("quantity")
     t.add_column("value", justify="right")
     tab = result["tables"]

@@ -1,7 +1,7 @@
 """FE speed benchmark: cost of one Newton iteration against one factorization of its tangent.
 
 The body is the paper-size verification spindle (40 x 300 mm, about 3.5k tet10 and 20k DOF,
-SPEC 3.2 / issue target): both ends fixed, fully activated, so the timings are taken at a
+docs/theory.md, 2.2; target in docs/benchmarks.md): both ends fixed, fully activated, so the timings are taken at a
 real, strongly nonlinear equilibrium state.
 """
 

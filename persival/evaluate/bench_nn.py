@@ -1,7 +1,7 @@
-"""`persival bench nn`: the speed table of SPEC 8 on a run folder.
+"""`persival bench nn`: the speed table (docs/theory.md, 8.4) on a run folder.
 
 Rows (batch 1 and 64, mean of up to ``reps`` calls after a warm-up, fewer when a row would
-take longer than ``budget_s``): the paper architecture 5 -> 2809 (SPEC 6 widths, timing only)
+take longer than ``budget_s``): the paper architecture 5 -> 2809 (docs/theory.md, 7.2 widths, timing only)
 as three separate nets and combined in PyTorch eager, the trained paper net (our biceps)
 combined, the POD net in PyTorch, the deployed ONNX tiers float32 / float16 / int8 under
 onnxruntime with 1 and 2 threads, the SG (whole surface of all muscles) per state, and, when
@@ -82,7 +82,7 @@ def _onnx_rows(run: LoadedRun, truth, reps, budget_s) -> list[dict]:
     export = run.layout.export
     if not (export / "metadata.json").is_file():
         return []
-    deployed = DeployedModel(export)  # checks the folder once (contract of SPEC 9)
+    deployed = DeployedModel(export)  # checks the folder once (contract: docs/deployment.md)
     rows = []
     for tier, variant in deployed.metadata["models"]["deformation"]["variants"].items():
         path = export / variant["file"]
@@ -174,7 +174,7 @@ def _held_out(run: LoadedRun, n_states: int = 25):
 
 
 def _targets(rows: list[dict], peer: dict) -> tuple[dict, list[str]]:
-    """SPEC 8: the deployed model >= 50x faster than the TFLite peer at batch 1, files <= 2 MB."""
+    """The speed target (docs/benchmarks.md): the deployed model >= 50x faster than the TFLite peer at batch 1, files <= 2 MB."""
     tflite = [r for r in rows if r["runtime"].startswith("TFLite") and r["batch"] == 1]
     deployed = [r for r in rows if r["variant"].startswith("deployed") and r["batch"] == 1]
     notes, check = [], {}
@@ -191,7 +191,7 @@ def _targets(rows: list[dict], peer: dict) -> tuple[dict, list[str]]:
         check["deployed_files_mb"] = tiers
         if "speedup_vs_tflite" in best:
             ok = best["speedup_vs_tflite"] >= 50.0
-            notes.append(f"SPEC 8 target (>= 50x the TFLite peer at batch 1): {best['variant']}, {best['threads']} "
+            notes.append(f"speed target (>= 50x the TFLite peer at batch 1): {best['variant']}, {best['threads']} "
                          f"thread(s), {best['ms_per_state']:.4f} ms = {best['speedup_vs_tflite']:.0f}x: "
                          f"{'met' if ok else 'NOT met'}.")
             check["speed_target_met"] = ok
@@ -241,7 +241,7 @@ def bench_table(run: LoadedRun, reps: int = 1000, budget_s: float = 4.0, peer: b
              "PyTorch rows with 1 thread; the SG's numpy BLAS with 1 and 2; 'ms / state' = ms / call / batch.",
              f"Held-out accuracy: against {label}; 'all' = every muscle of the deployed model.",
              "The paper's own times (their Intel i5, 6 cores) are below ours for reference, batch 1."] + notes
-    return make_table("bench_nn", "Evaluation times (SPEC 8)",
+    return make_table("bench_nn", "Evaluation times",
                       f"Seconds per call of every network variant and the SG; SG of {run.source_label}.",
                       BENCH_COLUMNS, rows, paper_values.SPEED, notes, targets=check, peer=peer_info,
                       config={"reps": reps, "budget_s": budget_s, "batches": list(BATCHES)})

@@ -1,4 +1,4 @@
-"""Speed of the sparse-grid surrogate on the paper's configuration (SPEC sections 4 and 8).
+"""Speed of the sparse-grid surrogate on the paper's configuration (docs/theory.md, 5.4; target in docs/benchmarks.md).
 
 d = 5 activations, regular level 2, cubic B-splines: 1053 grid points; one "state" is the
 whole biceps surface (2809 nodes x 3 coordinates) plus the elbow angle = 8428 outputs.

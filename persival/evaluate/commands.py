@@ -112,7 +112,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             ..., "--surrogate", help="LABEL=DIR of a fitted surface surrogate (fit-sg or adapt), repeatable."),
         out: Path = typer.Option(Path("results/accuracy"), "--out", help="Output directory (accuracy.json, accuracy.png)."),
     ) -> None:
-        """Surrogates vs held-out states (FE or analytic: the report says which): MaxAE, MAE, MaxRE, MRE (SPEC 7), angle error."""
+        """Surrogates vs held-out states (FE or analytic: the report says which): MaxAE, MAE, MaxRE, MRE, angle error."""
         import json
 
         from rich.console import Console
@@ -178,7 +178,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                                            help="Run a sparse-grid campaign of this level through the runner (0: none)."),
         out: Path | None = typer.Option(None, "--out", help="Also write the figures as JSON here."),
     ) -> None:
-        """The FE arm at campaign scale: response tables, exact and table-only states, a campaign (SPEC 8)."""
+        """The FE arm at campaign scale: response tables, exact and table-only states, a campaign."""
         import json
 
         from rich.console import Console
@@ -233,7 +233,7 @@ def _register_evaluate(app: typer.Typer) -> None:
         max_draws: int = typer.Option(20000, "--max-draws", min=300, help="Cap of the 300-draw stopping rule."),
         states: int = typer.Option(25, "--states", min=1, help="Held-out states of the error-propagation table."),
     ) -> None:
-        """The paper's tables (SPEC 7) and figures on a run: RUN/evaluate/*.md, *.json, *.png."""
+        """The paper's accuracy tables and figures on a run: RUN/evaluate/*.md, *.json, *.png."""
         from rich.console import Console
 
         from persival.campaign.store import StoreError
@@ -283,7 +283,7 @@ def _register_bench_nn(bench_app: typer.Typer) -> None:
         budget: float = typer.Option(4.0, "--budget", min=0.1, help="Seconds per row at most (then fewer calls)."),
         peer: bool = typer.Option(True, "--peer/--no-peer", help="Time the Keras/TFLite peer if installed."),
     ) -> None:
-        """Speed of every network variant, the deployed ONNX tiers and the SG (SPEC 8): RUN/evaluate/bench_nn.*"""
+        """Speed of every network variant, the deployed ONNX tiers and the SG: RUN/evaluate/bench_nn.*"""
         from rich.console import Console
 
         from persival.campaign.store import StoreError

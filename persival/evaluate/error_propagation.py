@@ -1,4 +1,4 @@
-"""SPEC 7 error propagation: the SG and the networks against states of the campaign's simulator.
+"""Error propagation (docs/theory.md, 8.3): the SG and the networks against states of the campaign's simulator.
 
 The held-out states (``OUT/campaign/held_out.zarr``, random activations the SG never saw) are
 solved by the same simulator as the SG's campaign; the table compares the SG with them, each
@@ -66,7 +66,7 @@ def _net_rows(run, truth, tested_on) -> list[dict]:
 
 
 def _table_rows(layout, run, truth, tested_on) -> list[dict]:
-    """The FE arm's table-only path (SPEC 8: five 2-D interpolations and a scalar root, issue 17)
+    """The FE arm's table-only path (docs/theory.md, 4.4: five 2-D interpolations and a scalar root)
     on the same held-out activations, when the run solved them that way too."""
     if not layout.held_out_table_only.exists():
         return []

@@ -1,4 +1,4 @@
-"""The paper's accuracy metrics (SPEC section 7), per state and over a set of states.
+"""The paper's accuracy metrics (docs/theory.md, 8.1), per state and over a set of states.
 
 Per state: node errors ``e_n = |x_pred,n - x_ref,n|`` (mm); MaxAE = max_n e_n, MAE = mean_n e_n;
 relative errors divide by the state's largest reference displacement ``max_m |u_ref,m|``

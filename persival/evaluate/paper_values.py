@@ -1,4 +1,4 @@
-"""The paper's own figures (its FE model of the arm, not ours), as SPEC 7 and 8 quote them.
+"""The paper's own figures (its FE model of the arm, not ours), as docs/theory.md, 8.2 and 8.4 use them.
 
 Keys follow the evaluation tables' column keys, so a paper row sits under our columns.
 """

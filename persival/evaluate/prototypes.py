@@ -3,7 +3,7 @@
 Four dense shapes from 5 activations to the N biceps nodes, one coordinate (x), as the paper:
 T-shaped (the width changes as late as possible), rectangular (as early as possible),
 triangular (linearly), each with 10 hidden layers, and the paper's exponential net (5 hidden
-layers, SPEC 6). The first hidden layer of the 10-layer prototypes has the input's width: with
+layers, docs/theory.md, 7.2). The first hidden layer of the 10-layer prototypes has the input's width: with
 that rule the paper's three parameter counts (17,154; 71,056,494; 26,103,046 for N = 2809) come
 out exactly.
 
@@ -31,7 +31,7 @@ SHAPES = ("T-shaped", "rectangular", "triangular", "exponential")
 
 
 def prototype_widths(shape: str, n_in: int, n_out: int, n_hidden: int = 10, n_mid: int = 700) -> list[int]:
-    """Hidden widths of a prototype (the exponential one: SPEC 6's 5 hidden layers through n_mid)."""
+    """Hidden widths of a prototype (the exponential one: docs/theory.md, 7.2, 5 hidden layers through n_mid)."""
     if shape == "T-shaped":
         return [n_in] * n_hidden
     if shape == "rectangular":
@@ -95,7 +95,7 @@ def prototype_table(data, n_mid: int | None = None, activation: str = "silu", sa
                     progress=None) -> tuple[dict, PaperNet]:
     """``data``: the SG training data of the biceps (a Dataset). Returns the table and the short-trained paper net."""
     n = data.surfaces.n_nodes
-    if n_mid is None or not 5 < n_mid < n:  # SPEC 6: 700 of 2809, the same ratio for other meshes
+    if n_mid is None or not 5 < n_mid < n:  # docs/theory.md, 7.2: 700 of 2809, the same ratio for other meshes
         n_mid = max(6, round(n * 700 / 2809))
     rows_used = np.random.default_rng(seed).permutation(len(data))[:samples]
     alpha = data.activations[rows_used]

@@ -37,7 +37,7 @@ code, pre { font-size: 0.8em; } pre { background: #f6f6f6; padding: 0.5em; overf
 CAPTIONS = {
     "hotspots_biceps.png": "Error hot spots: each biceps node's mean error |x_net - x_SG| over 500 random activations "
                            "(paper net after a short and after its full training, POD net), at the reference pose.",
-    "activation_model.png": "alpha_opt(Theta): the least-effort activations of SPEC 5 over the reachable range (SG).",
+    "activation_model.png": "alpha_opt(Theta): the least-effort activations over the reachable range (SG).",
     "history_paper.png": "Training history of the paper net: validation MAE per coordinate net and the losses per epoch.",
     "history_pod.png": "Training history of the POD net: validation MAE per coordinate and the losses per epoch.",
 }

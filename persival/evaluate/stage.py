@@ -1,4 +1,4 @@
-"""The evaluation stage of a run folder: every SPEC 7 table, the figures and the SPEC 8 speed table.
+"""The evaluation stage of a run folder: every accuracy table (docs/theory.md, section 8), the figures and the speed table.
 
 ``evaluate_run(out)`` reads ``OUT/{campaign,sg,inverse,data,networks,export}`` and writes
 ``OUT/evaluate/``: one ``<table>.md`` + ``<table>.json`` per table, the figures (``.png``) and
@@ -174,7 +174,7 @@ def _torch_predict(graph, alpha):
 
 def run_bench(out: str | Path, progress=True, reps: int = 1000, budget_s: float = 4.0, peer: bool = True,
               console=None, command: str | None = None) -> dict:
-    """The SPEC 8 speed table of a run folder: ``OUT/evaluate/bench_nn.{md,json}``; returns the table."""
+    """The speed table of a run folder: ``OUT/evaluate/bench_nn.{md,json}``; returns the table."""
     from persival.evaluate.bench_nn import bench_table
     from persival.evaluate.run_layout import load_run
 

@@ -1,4 +1,4 @@
-"""Surface surrogates against held-out states (SPEC section 7 metrics, "error propagation").
+"""Surface surrogates against held-out states (docs/theory.md, 8.1 metrics, "error propagation").
 
 Reads fitted surrogates from disk (``persival surrogate fit-sg`` / ``adapt``) and a campaign store
 of states they were not fitted to (e.g. ``persival campaign run --design random``), and

@@ -1,8 +1,8 @@
-"""The paper-architecture peer in Keras / TensorFlow Lite (SPEC 8), timed in a child process.
+"""The paper-architecture peer in Keras / TensorFlow Lite (docs/theory.md, 8.4), timed in a child process.
 
 The paper ran its combined net (common input, three per-coordinate nets, concatenated output)
 under Keras and TensorFlow Lite. This module rebuilds that net for 5 -> ``n_nodes`` with the
-SPEC 6 widths in Keras 3, converts it to a float32 TFLite flatbuffer and times batch 1 (and
+widths of docs/theory.md, 7.2 in Keras 3, converts it to a float32 TFLite flatbuffer and times batch 1 (and
 batch 64) under Keras and under the TFLite interpreter (XNNPACK) with 1 and 2 threads.
 
 TensorFlow is an optional extra (``pip install -e '.[peer]'``) and runs in its own process

@@ -1,11 +1,11 @@
 """The built-in upper-limb model's equilibria: five tet10 muscles, elbow angle from the moment balance.
 
-SPEC 3.3. Each muscle's origin face is fixed to the humerus, its insertion face is tied to the
+docs/theory.md, section 3. Each muscle's origin face is fixed to the humerus, its insertion face is tied to the
 forearm, which rotates about the elbow hinge (mesh, kinematics and the hinge's external loads:
 :mod:`persival.model.arm_body`). The unknowns are the muscle displacements and the elbow angle
 theta; theta's equation is the moment balance about the hinge of the muscles (their insertion
 forces and the forces they press on the bones they wrap over: frictionless penalty contact,
-SPEC 3.3), gravity and the passive joint moment. Muscles do not touch each other (the paper's
+docs/theory.md, 3.5), gravity and the passive joint moment. Muscles do not touch each other (the paper's
 mortar contact does). The hanging arm is kept in the state cache.
 """
 
@@ -34,7 +34,7 @@ __all__ = ["ArmModel", "ArmState", "muscle_profile", "rotation_about"]
 
 
 class ArmModel(ArmStateCache, ArmBody):
-    """The FE upper limb: ``solve(activations) -> ArmState`` (SPEC 3.3).
+    """The FE upper limb: ``solve(activations) -> ArmState`` (docs/theory.md, section 3).
 
     Meshing happens once at construction. Every muscle is its own FE problem
     (:class:`~persival.model.muscle_unit.MuscleUnit`: its state depends on its origin-insertion
@@ -75,7 +75,7 @@ class ArmModel(ArmStateCache, ArmBody):
         return MuscleUnit(muscle.name, mesh, material, path, self.options)
 
     def _bones_of(self, muscle: Muscle):
-        """theta -> the capsules of the bones ``muscle`` wraps over, world frame (SPEC 3.3 contact)."""
+        """theta -> the capsules of the bones ``muscle`` wraps over, world frame (docs/theory.md, 3.5)."""
         bones = [self.spec.bone(name) for name in muscle.wraps]
         return lambda theta: bone_obstacles(bones, self.centre, self.axis, theta)
 
@@ -147,7 +147,7 @@ class ArmModel(ArmStateCache, ArmBody):
 
     def hold(self, activations, angle_deg: float, warm_start: ArmState | None = None, progress=None) -> ArmState:
         """The arm held at ``angle_deg`` by a brace (an isometric state, as on a dynamometer): every
-        muscle in its own equilibrium at that angle (SPEC 3.3), continued from its rest state
+        muscle in its own equilibrium at that angle (docs/theory.md, 3.8), continued from its rest state
         (or from ``warm_start``'s muscles). The joint is not balanced: ``moment_residual`` is
         g(theta) = -sum M_m - M_ext, the moment the brace exerts on the forearm (flexion positive;
         also ``statistics["brace_moment_Nmm"]``). Same retry ladder as :meth:`solve`.
@@ -223,7 +223,7 @@ class ArmModel(ArmStateCache, ArmBody):
         return max(self.options.moment_atol, self.options.moment_rtol * summed)
 
     def _equilibrium(self, target, start: dict[str, MuscleState], angle: float, tracker: SolveTracker) -> ArmState:
-        """Solve g(theta) = 0 by a safeguarded Newton iteration on theta (SPEC 3.3: an
+        """Solve g(theta) = 0 by a safeguarded Newton iteration on theta (docs/theory.md, 3.7: an
         equivalent of the bordered system). Its derivative is the Schur complement of every
         muscle (exact, so the iteration converges quadratically); a bracket of the root and a
         largest step keep it from jumping past a stiff joint limit, and a trial angle whose

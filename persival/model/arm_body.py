@@ -1,6 +1,6 @@
 """The arm's fixed parts: its mesh and material, the joint's kinematics and the loads on the hinge.
 
-SPEC 3.3. Each muscle is a swept solid around its centre line (origin, via points, insertion
+docs/theory.md, 3.2. Each muscle is a swept solid around its centre line (origin, via points, insertion
 in the muscle's mesh pose), meshed stress free by gmsh and graded from tendon to belly; the
 forearm turns about the elbow hinge, and gravity on forearm plus hand and a passive joint moment
 that stiffens beyond the anatomical limits load the hinge. Everything here is fixed once the
@@ -28,7 +28,7 @@ def muscle_profile(muscle: Muscle, s: np.ndarray, length: float) -> tuple[np.nda
     """Radius and muscle fraction gamma_M along the normalized centre-line position s.
 
     Pure tendon over the tendon lengths, a linear muscle-tendon blend over
-    ``transition_length`` (SPEC 3.1 mixture), then the belly. The radius rises from the
+    ``transition_length`` (docs/theory.md, 1.5 mixture), then the belly. The radius rises from the
     tendon's to 90 % of the belly's over 1.5 transition lengths (smoothstep) and bulges to the
     full belly radius at the middle. Why so blunt: the muscle's sections are in series, so the
     thinnest pure-muscle section bounds the force the whole unit can pull (0.3 MPa times its
@@ -175,7 +175,7 @@ class ArmBody:
 
         L is the origin-insertion path's length less the wrapped path's cable (``wrap_cable``):
         the length of the FE body between its end faces. The insertion turns about the hinge:
-        I' = k x (I - c), I'' = k x I'. A wrapped path (SPEC 3.3, :mod:`persival.model.wrapping`)
+        I' = k x (I - c), I'' = k x I'. A wrapped path (docs/theory.md, 3.4, :mod:`persival.model.wrapping`)
         gains r per radian while it wraps.
         """
         insertion = self.forearm_point(muscle.insertion, theta_deg)

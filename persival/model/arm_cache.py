@@ -1,6 +1,6 @@
 """The arm's rest states and hanging arm in the on-disk state cache (persival.model.state_cache).
 
-Every muscle's rest state (its passive equilibrium at its mesh pose, SPEC 3.3) and the hanging
+Every muscle's rest state (its passive equilibrium at its mesh pose, docs/theory.md, 1.6) and the hanging
 arm (all activations 0) are computed once per model file and mesh and kept on disk, keyed by
 the model hash, the profile and the mesh; :class:`ArmStateCache` is the part of
 :class:`~persival.model.arm.ArmModel` that reads and writes them.
@@ -26,7 +26,7 @@ class ArmStateCache:
 
     def rest_states(self, tracker: SolveTracker | None = None, cache: bool = True) -> dict[str, MuscleState]:
         """Every muscle's passive equilibrium at its mesh length (the prestretch switched on,
-        SPEC 3.3): the units' own when they have them, else from the state cache when there, else
+        docs/theory.md, 1.6): the units' own when they have them, else from the state cache when there, else
         solved (20 s on the quick mesh) and, with ``cache``, written there without a hanging arm yet."""
         in_memory = all(getattr(unit, "_rest", None) is not None for unit in self.units.values())
         if not in_memory and not (cache and self.load_cached_rest_states()):

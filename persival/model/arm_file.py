@@ -1,4 +1,4 @@
-"""The upper-limb model file (TOML): schema, validation, loading (SPEC 3.3).
+"""The upper-limb model file (TOML): schema, validation, loading (docs/theory.md, section 3).
 
 The model is data: bones, the elbow hinge, the forearm's weight, passive joint limits, the
 five muscles (geometry, tissue layout, fibre prestretch, bulk moduli) and mesh profiles.
@@ -60,7 +60,7 @@ class Forearm(_Strict):
     # Not in the default TOML on purpose: the FE states do not depend on it, and adding it there
     # would change the model hash that keys every campaign store. 330 mm: forearm (elbow to
     # wrist, about 255 mm here) plus about 40 % of a 190 mm hand, the centre of a grip.
-    hand_distance: float = Field(330.0, gt=0, description="mm from the elbow to a load held in the hand (SPEC 5 motion model)")
+    hand_distance: float = Field(330.0, gt=0, description="mm from the elbow to a load held in the hand (motion model)")
 
 
 class Bone(_Strict):
@@ -72,7 +72,7 @@ class Bone(_Strict):
 
 
 class Contact(_Strict):
-    penalty: float = Field(1.0, gt=0, description="N/mm^3: contact pressure per mm of penetration (SPEC 3.3)")
+    penalty: float = Field(1.0, gt=0, description="N/mm^3: contact pressure per mm of penetration (docs/theory.md, 3.5)")
 
 
 class Muscle(_Strict):
@@ -223,7 +223,7 @@ def _distance_to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
 
 # Bumped whenever the physics code changes the states a model file produces, so that stores,
 # tables and caches keyed by the model hash are never reused across it. 2: the fibre reference
-# lambda_0 moves the force-length curve only (SPEC 3.3; issue 11).
+# lambda_0 moves the force-length curve only (docs/theory.md, 1.6).
 PHYSICS_VERSION = 2
 
 

@@ -1,4 +1,4 @@
-"""Vectorized total-Lagrangian assembly of tet10 internal forces and tangents (SPEC 3.2).
+"""Vectorized total-Lagrangian assembly of tet10 internal forces and tangents (docs/theory.md, 2.2).
 
 Weak form of quasi-static equilibrium in the reference configuration:
 ``f_int[a, i] = sum_q w_q det(J_q) P_iJ dN_a/dX_J`` with ``P = F S`` and the tangent
@@ -189,7 +189,7 @@ def _gather_sum(data, ptr, entries, values):
 
 @njit(cache=True, parallel=True)
 def _element_kernel(ue, dN, w, a0, act, gm, k, pre, p, with_tangent, fe, Ke):
-    """Element internal forces and tangents of all cells (SPEC 3.2 weak form, module docstring).
+    """Element internal forces and tangents of all cells (docs/theory.md, 2.2 weak form, module docstring).
 
     Returns the number of cells with det F <= 0 at some quadrature point.
     """

@@ -52,7 +52,7 @@ class Dirichlet:
 
 @dataclass
 class Hinge:
-    """Nodes tied to a rigid body that rotates about a fixed axis (the elbow, SPEC 3.3).
+    """Nodes tied to a rigid body that rotates about a fixed axis (the elbow, docs/theory.md, 3.1).
 
     A node with reference position X, meshed while the body stood at ``node_reference_deg``,
     sits at ``x = c + R(theta - theta_ref) (X - c)``.

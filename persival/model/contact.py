@@ -1,4 +1,4 @@
-"""Muscle-bone contact: rigid analytic obstacles, frictionless normal penalty contact (SPEC 3.3).
+"""Muscle-bone contact: rigid analytic obstacles, frictionless normal penalty contact (docs/theory.md, 3.5).
 
 A bone is a rigid obstacle described by its surface's closest-point projection: a capsule
 (a segment with a radius: the model file's ``[[bones]]`` entries) or a half-space (verification).
@@ -6,7 +6,7 @@ For a body point at current position x it gives the penetration depth
 ``g(x) = r - dist(x, axis segment)`` (capsule), the outward unit normal n at the closest
 surface point and the normal's gradient ``dn/dx``. Contact adds the penalty energy
 
-    Pi_c = sum_p 0.5 eps w_p <g_p>^2,    <g> = max(0, g)        (SPEC 3.3 contact)
+    Pi_c = sum_p 0.5 eps w_p <g_p>^2,    <g> = max(0, g)        (docs/theory.md, 3.5)
 
 over contact points p of the body's surface, each with an area weight w_p: the surface nodes
 with their tributary areas (:func:`surface_node_weights`), or the quadrature points of the
@@ -71,7 +71,7 @@ class Capsule:
         return cls(bone.start, bone.end, float(bone.radius), bone.name)
 
     def project(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, Callable[[np.ndarray], np.ndarray]]:
-        """Penetration g (n,), outward normal n (n, 3) and ``dn_dx(mask) -> (k, 3, 3)`` (SPEC 3.3 contact)."""
+        """Penetration g (n,), outward normal n (n, 3) and ``dn_dx(mask) -> (k, 3, 3)`` (docs/theory.md, 3.5)."""
         axis = self.end - self.start
         length = float(np.linalg.norm(axis))
         t = axis / length if length > 0 else np.zeros(3)
@@ -131,7 +131,7 @@ class HalfSpace:
 
 def bone_obstacles(bones, centre, axis, theta_deg: float) -> list[Capsule]:
     """Capsules of model-file bones at elbow angle theta: ``forearm`` bones (given at theta = 0)
-    turn about the hinge, ``upper_arm`` bones stay (SPEC 3.3)."""
+    turn about the hinge, ``upper_arm`` bones stay (docs/theory.md, 3.5)."""
     out = []
     for bone in bones:
         capsule = Capsule.from_bone(bone)
@@ -238,12 +238,12 @@ class ObstacleContact:
             yield obstacle, g > 0.0, g, n, dn_dx
 
     def energy(self, x: np.ndarray) -> float:
-        """Pi_c = sum_p 0.5 eps w_p <g_p>^2 (N mm; SPEC 3.3 contact)."""
+        """Pi_c = sum_p 0.5 eps w_p <g_p>^2 (N mm; docs/theory.md, 3.5)."""
         return sum(0.5 * self.penalty * float(self.weights[a] @ g[a] ** 2) for _, a, g, _, _ in self._pairs(x))
 
     def force_and_tangent(self, x: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix]:
         """Residual contribution dPi_c/dx (n_dofs,) and its full symmetric Hessian (n_dofs x n_dofs):
-        per active point f_p = -eps w g n, K_p = eps w (n n^T - g dn/dx) (SPEC 3.3 contact)."""
+        per active point f_p = -eps w g n, K_p = eps w (n n^T - g dn/dx) (docs/theory.md, 3.5)."""
         n_points = self.interpolation.shape[0]
         f_p = np.zeros((n_points, 3))
         rows, blocks = [], []
@@ -263,7 +263,7 @@ class ObstacleContact:
         return (self.interpolation.T @ f_p).ravel(), (G.T @ K_p @ G).tocsr()
 
     def force(self, x: np.ndarray) -> np.ndarray:
-        """Residual contribution dPi_c/dx (n_dofs,) alone (SPEC 3.3 contact: f_p = -eps w g n)."""
+        """Residual contribution dPi_c/dx (n_dofs,) alone (docs/theory.md, 3.5: f_p = -eps w g n)."""
         f_p = np.zeros((self.interpolation.shape[0], 3))
         for _, a, g, n, _ in self._pairs(x):
             f_p[a] -= (self.penalty * self.weights[a] * g[a])[:, None] * n[a]
@@ -279,7 +279,7 @@ class ObstacleContact:
     def obstacle_loads(self, x: np.ndarray, centre) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Per obstacle: total force (N) and moment (N mm, about ``centre``) that the body exerts on it.
 
-        The body pushes an obstacle with ``-eps w g n`` per point (SPEC 3.3 contact): a bone on
+        The body pushes an obstacle with ``-eps w g n`` per point (docs/theory.md, 3.5): a bone on
         the forearm passes this moment on to the elbow's balance.
         """
         xp, c, out = self.points(x), _as_vector(centre), {}

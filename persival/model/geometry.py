@@ -184,7 +184,7 @@ def spindle(
 
 
 def spindle_material(mesh: Tet10Mesh, prestretch: float = 1.0, transition: float = 0.1):
-    """Material of a fusiform muscle-tendon unit along its ``arclength`` cell data (SPEC 3.1).
+    """Material of a fusiform muscle-tendon unit along its ``arclength`` cell data (docs/theory.md, 1.5).
 
     Pure tendon over the first and last ``transition`` of the length, a linear muscle-tendon
     blend over the next ``transition``, pure muscle in the belly. Bulk moduli k = 100 MPa

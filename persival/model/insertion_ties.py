@@ -1,4 +1,4 @@
-"""How a muscle's insertion face follows the elbow angle: the two readings of SPEC 3.3's ties.
+"""How a muscle's insertion face follows the elbow angle: the two ties of docs/theory.md, 3.3.
 
 A muscle unit (persival.model.muscle_unit) holds its origin face clamped and moves its
 insertion face with theta; the tie says how, and in which frame the unit is solved:
@@ -9,7 +9,7 @@ insertion face with theta; the tie says how, and in which frame the unit is solv
   direction by ``L(theta) - L_mesh``, so a muscle without bones depends on L alone. A bone the
   muscle presses on makes its reaction turn with the line, though: the insertion face stays
   square to O-I and the contact's push reaches the forearm as a shear (docs/arm_model.md).
-* :class:`ForearmTie`: SPEC 3.3 read literally, "insertion faces tied to the forearm (they move
+* :class:`ForearmTie`: the specification read literally, "insertion faces tied to the forearm (they move
   rigidly with theta)": the insertion face turns with the forearm about the hinge,
   ``x = c + R(theta - theta_mesh)(X - c)``, the origin face stays fixed to the humerus, and the
   unit is solved in the world frame. The tendon then leaves the bone in its own direction,
@@ -17,7 +17,7 @@ insertion face with theta; the tie says how, and in which frame the unit is solv
 
 Each tie gives the motion of the insertion DOFs per radian, ``g = dp/dtheta`` and
 ``g2 = d2p/dtheta2``, from which the unit's moment is the virtual work of the face reaction f:
-``dPi*/dtheta = f . g + dPi_c/dtheta`` (envelope theorem, SPEC 3.3); for the line tie
+``dPi*/dtheta = f . g + dPi_c/dtheta`` (envelope theorem, docs/theory.md, 3.7); for the line tie
 ``f . g = T L'`` and ``f . g2 = T L''``.
 """
 

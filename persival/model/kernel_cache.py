@@ -3,7 +3,7 @@
 numba's ``cache=True`` keys a compiled kernel by its own source file only. The element kernel of
 :mod:`persival.model.assembly` inlines the constitutive law of :mod:`persival.model.material`, so
 after a change of the law numba would keep serving the kernel compiled with the old one. That
-happened: the SPEC 3.3 fibre-reference fix passed the law's own tests (material.py's kernels were
+happened: the fibre-reference fix (docs/theory.md, 1.6) passed the law's own tests (material.py's kernels were
 recompiled) while every FE solve still ran the old law from assembly's cached kernel.
 :func:`drop_stale_kernels` keeps a hash of the dependencies' sources beside the cache and removes
 the module's cached kernels when it changes, before numba looks at them.

@@ -1,4 +1,4 @@
-"""The muscle-tendon constitutive law of SPEC 3.1 (Roehrle et al. 2017 as used by the paper).
+"""The muscle-tendon constitutive law of docs/theory.md, section 1 (Roehrle et al. 2017 as used by the paper).
 
 Second Piola-Kirchhoff stress, for a mixture of muscle (fraction ``gamma_M``) and tendon
 (``gamma_ST = 1 - gamma_M``):
@@ -32,14 +32,14 @@ class TissueParameters:
     c4: float
 
 
-# SPEC 3.1, paper Table A.
+# docs/theory.md, 1.7 (the paper's Table A).
 MUSCLE = TissueParameters(c1=3.56e-2, c2=3.86e-3, c3=3.57e-8, c4=42.6)
 TENDON = TissueParameters(c1=2.31, c2=1.15e-6, c3=7.99, c4=16.6)
 
 
 @dataclass(frozen=True)
 class MaterialParameters:
-    """All parameters of the law except the bulk modulus (SPEC 3.1, Table A)."""
+    """All parameters of the law except the bulk modulus (docs/theory.md, 1.7)."""
 
     muscle: TissueParameters = field(default_factory=lambda: MUSCLE)
     tendon: TissueParameters = field(default_factory=lambda: TENDON)
@@ -68,7 +68,7 @@ DEFAULT_PARAMETERS = MaterialParameters()
 # --------------------------------------------------------------------------------------------
 @njit(cache=True, inline="always")
 def _force_length_point(lam, p):
-    """Active force-length f(lambda) and df/dlambda (SPEC 3.1, active fibre term):
+    """Active force-length f(lambda) and df/dlambda (docs/theory.md, 1.4):
     f = exp(-|(lambda/lambda_opt - 1)/dW|^nu), ascending branch for lambda <= lambda_opt."""
     lam_opt = p[12]
     if lam <= lam_opt:
@@ -85,7 +85,7 @@ def _force_length_point(lam, p):
 
 @njit(cache=True, inline="always")
 def _passive_fibre_point(lam, c3, c4):
-    """phi = c3/lambda^2 (lambda^c4 - 1) for lambda >= 1, else 0 (SPEC 3.1), and dphi/dlambda."""
+    """phi = c3/lambda^2 (lambda^c4 - 1) for lambda >= 1, else 0 (docs/theory.md, 1.3), and dphi/dlambda."""
     if lam < 1.0:
         return 0.0, 0.0
     return c3 * (lam ** (c4 - 2.0) - lam**-2.0), c3 * ((c4 - 2.0) * lam ** (c4 - 3.0) + 2.0 * lam**-3.0)
@@ -121,7 +121,7 @@ def _law_point(F, a0, act, gm, k, pre, p, S, CC, with_tangent):
     Ci[2, 2] = (C[0, 0] * C[1, 1] - C[0, 1] * C[1, 0]) / I3
     Ci[1, 0], Ci[2, 0], Ci[2, 1] = Ci[0, 1], Ci[0, 2], Ci[1, 2]
 
-    # SPEC 3.1: c1, c2 of the mixture blend linearly between muscle and tendon.
+    # docs/theory.md, 1.5: c1, c2 of the mixture blend linearly between muscle and tendon.
     gT = 1.0 - gm
     c1 = gm * p[0] + gT * p[4]
     c2 = gm * p[1] + gT * p[5]
@@ -132,7 +132,7 @@ def _law_point(F, a0, act, gm, k, pre, p, S, CC, with_tangent):
     B3 = -(2.0 / 3.0) * c1 * p13 * I1 - (4.0 / 3.0) * c2 * p23 * I2
     g_vol = k * (Jdet - 1.0) * Jdet  # S_vol = k (J - 1) J C^-1
 
-    # Fibre terms (SPEC 3.3, "fibre reference"). lambda_T = sqrt(a0 . C a0) is the stretch from
+    # Fibre terms (docs/theory.md, 1.6, fibre reference). lambda_T = sqrt(a0 . C a0) is the stretch from
     # the mesh pose, lambda_M = lambda_0 lambda_T the muscle fibre's stretch from its slack
     # length. The muscle's terms are g(lambda_M) / lambda_T^2 M with g = c3 (lambda_M^c4 - 1) +
     # act S_max f(lambda_M): lambda_0 shifts the force-length and passive curves and nothing
@@ -266,7 +266,7 @@ def second_piola_kirchhoff(
     F: (..., 3, 3) deformation gradient; a0: (..., 3) unit fibre direction in the reference
     configuration; activation alpha in [0, 1], scalar or (...); muscle_fraction gamma_M in
     [0, 1] with gamma_ST = 1 - gamma_M; bulk_modulus k in MPa; fibre_prestretch lambda_0 (the
-    muscle fibres' stretch in the mesh pose relative to their slack length, SPEC 3.3; the
+    muscle fibres' stretch in the mesh pose relative to their slack length, docs/theory.md, 1.6; the
     tendon term is not prestretched). Every other parameter
     comes from ``parameters`` (Table A by default).
     """

@@ -1,6 +1,6 @@
 """Quadratic tetrahedral meshes: the container, checks, surface extraction, gmsh and meshio I/O.
 
-gmsh makes the meshes (SPEC 3.2), meshio writes them (VTU for ParaView); this module only
+gmsh makes the meshes (docs/theory.md, 2.1), meshio writes them (VTU for ParaView); this module only
 converts between their conventions and ours and refuses meshes the solver cannot use.
 """
 

@@ -1,4 +1,4 @@
-"""An independent check of arm states: the monolithic formulation of SPEC 3.3.
+"""An independent check of arm states: the monolithic formulation (docs/theory.md, 3.7).
 
 The arm is solved muscle by muscle (persival.model.muscle_unit); here a state goes back into
 the formulation the paper states: the whole mesh at once, every face tied to the free elbow
@@ -39,7 +39,7 @@ def verify_equilibrium(arm, state: ArmState) -> tuple[float, float]:
             O.append(np.tile(m.origin, (len(ids), 1)))
             I.append(np.tile(insertion_ref, (len(ids), 1)))
             is_insertion.append(np.full(len(ids), end == "insertion"))
-    # the body ends (a wrapped path's end slides along its first segment, SPEC 3.3)
+    # the body ends (a wrapped path's end slides along its first segment, docs/theory.md, 3.4)
     repeats = np.array(counts)
     line_ends = lambda theta: np.repeat(np.repeat([arm.body_end(m, theta) for m in muscles], 2, axis=0),  # noqa: E731
                                         repeats, axis=0)

@@ -1,6 +1,6 @@
 """What a muscle's FE solve returns (MuscleState) and what it needs to know of the arm (MusclePath).
 
-SPEC 3.3: each muscle is its own FE body whose state depends on the elbow angle theta and its
+docs/theory.md, 3.3: each muscle is its own FE body whose state depends on the elbow angle theta and its
 own activation only (persival.model.muscle_unit).
 """
 
@@ -40,7 +40,7 @@ class MusclePath:
 
     ``geometry(theta) -> (L, dL/dtheta, d2L/dtheta2)`` (mm, per radian); ``insertion(theta)``
     the world insertion point; ``bones(theta)`` the rigid obstacles (world frame) the muscle
-    wraps over, with the penalty ``penalty`` (N/mm^3; SPEC 3.3 contact); none: no contact.
+    wraps over, with the penalty ``penalty`` (N/mm^3; docs/theory.md, 3.5); none: no contact.
     ``insertion_tie``: "line" (ball joints on the line of action) or "forearm" (the insertion
     face rigid with the forearm about ``hinge`` = (centre, axis)); persival.model.insertion_ties.
     """

@@ -1,14 +1,14 @@
 """One muscle-tendon unit between its origin and insertion faces, solved in its own frame.
 
-SPEC 3.3 ties each muscle's end faces to its line of action by default (ball joints: the origin face
+docs/theory.md, 3.3: by default each muscle's end faces are tied to its line of action (ball joints: the origin face
 turns about the fixed origin point O, the insertion face rides on the forearm's insertion
 point I(theta), and both faces turn by the minimal rotation Q(theta) that takes the mesh-pose
 line direction d_ref to the current one d(theta); see :class:`~persival.model.constraints.Hinge`).
 Because the law is objective and the muscles carry no body force, the deformed muscle at
 elbow angle theta is exactly the rigid motion ``x = O + Q(theta) (y - O)`` of the solution
 ``y`` of a simpler problem: origin face held in its mesh pose, insertion face translated along
-d_ref by ``L(theta) - L_mesh`` (L = |I - O|), and the bones the muscle wraps over (SPEC 3.3
-contact) turned into that frame by ``Q(theta)^T`` about O. A muscle's state therefore depends on
+d_ref by ``L(theta) - L_mesh`` (L = |I - O|), and the bones the muscle wraps over (docs/theory.md,
+3.5) turned into that frame by ``Q(theta)^T`` about O. A muscle's state therefore depends on
 two numbers, the elbow angle theta and its activation a, and nothing of the other muscles.
 A muscle may instead tie its insertion face rigidly to the forearm (``insertion_tie =
 "forearm"``; persival.model.insertion_ties): it is then solved in the world frame, Q = I, with
@@ -136,7 +136,7 @@ class MuscleUnit:
         """The passive equilibrium at the mesh pose (activation 0), solved once.
 
         With a fibre prestretch lambda_0 > 1 the mesh pose carries a small passive fibre
-        stress (SPEC 3.3) and is not yet in equilibrium. Newton from the mesh pose can fail
+        stress (docs/theory.md, 1.6) and is not yet in equilibrium. Newton from the mesh pose can fail
         on it (the passive law's c4 = 42.6 makes the tangent far stiffer than the stress
         suggests), so the prestretch is switched on by continuation, 1 -> lambda_0.
         ``progress(share)`` is called after every accepted load step (share of the prestretch).
@@ -304,7 +304,7 @@ class MuscleUnit:
     def response(self, theta_deg: float, activation: float, displacement: np.ndarray, K=None,
                  force: np.ndarray | None = None) -> MuscleState:
         """The state of an equilibrium u at (theta, a): tension, moment M = -dPi*/dtheta, its slope
-        and du/dtheta (SPEC 3.3; module docstring). With theta moving, the insertion face moves by
+        and du/dtheta (docs/theory.md, 3.7; module docstring). With theta moving, the insertion face moves by
         ``g = dp/dtheta`` (``L'`` times the axial unit motion for the line tie) and the bones' forces
         change at fixed u by ``df_c/dtheta``; with f the internal force (the face's reaction):
 

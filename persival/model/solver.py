@@ -2,7 +2,7 @@
 
 Unknowns are the displacements of the nodes not held by a constraint. A load factor t runs
 from 0 to 1; activation and prescribed displacements are interpolated along it
-(continuation, SPEC 3.2). Each step is solved by Newton's method with the consistent tangent;
+(continuation, docs/theory.md, 2.3). Each step is solved by Newton's method with the consistent tangent;
 the step is halved when Newton fails (divergence, an inverted element, a singular tangent)
 and grows again after easy steps.
 """
@@ -109,7 +109,7 @@ class QuasiStaticSolver:
     symmetric bordered system by a Schur complement on the factorized ``K_ff`` (two right-hand
     sides, one factorization).
 
-    ``extra_terms``: further potential terms (contact with rigid obstacles, SPEC 3.3; see
+    ``extra_terms``: further potential terms (contact with rigid obstacles, docs/theory.md, 3.5; see
     :mod:`persival.model.contact`). Each has ``force_and_tangent(x) -> (f (n_dofs,), K)`` at the
     current node positions ``x = X + u`` (n_nodes, 3): its gradient and its full symmetric
     Hessian (sparse, n_dofs x n_dofs), added to the residual and the tangent. K's entries must
@@ -206,7 +206,8 @@ class QuasiStaticSolver:
         return self._add_extra_terms(u, f) if self.extra_terms else f
 
     def _add_extra_terms(self, u, f, K=None):
-        """f + sum of the terms' forces (e.g. SPEC 3.3 contact); their tangents' upper triangles are added into K.data."""
+        """f + sum of the terms' forces (e.g. contact, docs/theory.md, 3.5); their tangents' upper triangles
+        are added into K.data."""
         x = self.mesh.points + np.asarray(u, dtype=float).reshape(-1, 3)
         n = self.assembler.n_dofs
         for term in self.extra_terms:
@@ -289,7 +290,7 @@ class QuasiStaticSolver:
         Falls back to factorizing when the refinement stalls.
 
         ``force_rate``: the residual's own rate ds of change at fixed u (n_dofs,; e.g. obstacles
-        moving with s, SPEC 3.3 contact): the free DOFs then solve ``K_ff du_f = -(K g + df/ds)_f``,
+        moving with s, docs/theory.md, 3.5): the free DOFs then solve ``K_ff du_f = -(K g + df/ds)_f``,
         and the first value is still ``g . K du`` (the rate of the constrained DOFs' reaction
         along g)."""
         Kg = symmetric_matvec(K, g)

@@ -1,4 +1,4 @@
-"""The quadratic 10-node tetrahedron (SPEC 3.2): shape functions and quadrature.
+"""The quadratic 10-node tetrahedron (docs/theory.md, 2.1): shape functions and quadrature.
 
 Node order is VTK's / meshio's ``tetra10``: corners 0-3, then the mid-side nodes of the
 edges (0,1), (1,2), (0,2), (0,3), (1,3), (2,3). gmsh numbers the last two edges the other

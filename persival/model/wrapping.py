@@ -1,6 +1,6 @@
 """A tendon over a wrap cylinder on the hinge axis: the muscle path's length and its derivatives.
 
-SPEC 3.3, muscle paths. A muscle with ``wrap_radius`` r > 0 runs from its origin O (fixed to the
+docs/theory.md, 3.4, muscle paths. A muscle with ``wrap_radius`` r > 0 runs from its origin O (fixed to the
 upper arm) to its insertion I(theta) (turning with the forearm) along the shortest path that
 stays outside a cylinder of radius r about the hinge axis, fixed to the humerus: the trochlea
 and olecranon that the triceps tendon slides over (the classic wrap cylinder of musculoskeletal
@@ -61,7 +61,7 @@ class WrapCylinder:
         if min(d_o, d_i) <= r:
             raise ValueError(f"a muscle end lies inside its wrap cylinder (radius {r} mm)")
         b_o, b_i = np.arccos(r / d_o), np.arccos(r / d_i)
-        # tangent points: leaving O the contact point moves in the turning sense (SPEC 3.3 wraps)
+        # tangent points: leaving O the contact point moves in the turning sense (docs/theory.md, 3.4)
         phi_o = a_o + self.turn * b_o
         phi_i = a_i - self.turn * b_i
         # in (-pi, pi]: a straight segment that clears the cylinder has a negative "arc"

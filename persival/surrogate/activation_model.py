@@ -1,4 +1,4 @@
-"""The angle activation model of SPEC 5: a smooth map Theta -> alpha_opt(Theta) over the range.
+"""The angle activation model (docs/theory.md, 6.3): a smooth map Theta -> alpha_opt(Theta) over the range.
 
 Built by continuation along Theta on the SG (each target starts from its neighbour's solution,
 so the map follows one continuous branch of minima), with a global multi-start solve beside it
@@ -21,7 +21,7 @@ from persival.surrogate.inverse import InverseProblem
 
 __all__ = ["AngleActivationModel", "ADMISSIBLE_RANGE_DEG"]
 
-#: SPEC 5: the paper's admissible elbow angles (deg), cut to the reachable range if smaller
+#: docs/theory.md, 6.3: the paper's admissible elbow angles (deg), cut to the reachable range if smaller
 ADMISSIBLE_RANGE_DEG = (10.0, 150.0)
 
 

@@ -1,4 +1,4 @@
-"""Spatially adaptive refinement of a B-spline boundary sparse grid (SPEC section 4, "beyond
+"""Spatially adaptive refinement of a B-spline boundary sparse grid (docs/theory.md, 5.5, "beyond
 the paper").
 
 Follows SG++'s surplus-based refinement for boundary grids (``HashRefinementBoundaries`` with

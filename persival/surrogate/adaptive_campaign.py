@@ -1,4 +1,4 @@
-"""Spatially adaptive sparse grid grown on a real campaign (SPEC section 4, "beyond the paper").
+"""Spatially adaptive sparse grid grown on a real campaign (docs/theory.md, 5.5, beyond the paper).
 
 :func:`persival.surrogate.adaptive.refine_adaptive` decides which points to add; this module
 supplies its ``simulate`` callback: every point it asks for is looked up among the done states
@@ -123,7 +123,7 @@ def run_adaptive_campaign(
 
     The refinement indicator is the ``norm`` ("max" or "l2") of each point's hierarchical
     surplus row over every surface coordinate (mm) and the elbow angle (deg): "max" refines
-    where some node or the angle is worst interpolated, matching the MaxAE metric (SPEC 7).
+    where some node or the angle is worst interpolated, matching the MaxAE metric (docs/theory.md, 8.1).
     ``scheduler`` defaults to in-process so that the simulator, its meshes and its solved
     states stay warm from one step to the next.
     """

@@ -128,7 +128,7 @@ def _register_inverse_and_networks(app: typer.Typer) -> None:
         out: Path = typer.Option(None, "--out", help="Also build the activation model Theta -> alpha_opt: "
                                  "OUT/activation_model.json and .png."),
     ) -> None:
-        """Least-effort activations for elbow angles (SPEC 5) on the SG; optionally the activation model."""
+        """Least-effort activations for elbow angles on the SG; optionally the activation model."""
         import json
 
         from rich.console import Console
@@ -226,7 +226,7 @@ def _register_motion(app: typer.Typer) -> None:
         angles: str = typer.Option("30,60,90,120", "--angles", help="Elbow angles (deg) of the printed table."),
         loads: str = typer.Option("0,1,2,5", "--loads", help="Hand loads (kg) of the printed table."),
     ) -> None:
-        """The motion-and-load activation model (SPEC 5) from a moment table: build, plot, ONNX."""
+        """The motion-and-load activation model from a moment table: build, plot, ONNX."""
         import numpy as np
         from rich.console import Console
 

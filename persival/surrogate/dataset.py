@@ -96,6 +96,17 @@ def describe_source(summary: dict, description: dict, n_states: int) -> dict:
 
 @dataclass
 class Dataset:
+    """States of one model: activations (n, 5), the surface positions (n, N, 3) mm of the muscles
+    in ``surfaces``, elbow angles (n,) deg and their provenance (``source``).
+
+    >>> surfaces = Surfaces(("biceps",), (3,), np.eye(3), np.array([[0, 1, 2]]), (1,))
+    >>> data = Dataset(np.zeros((2, 5)), np.stack([np.eye(3), 2 * np.eye(3)]), np.array([30.0, 90.0]), surfaces)
+    >>> len(data), data.displacements[1, 0].tolist()  # u = x - X
+    (2, [1.0, 0.0, 0.0])
+    >>> data.surfaces.nodes_of("biceps")
+    slice(0, 3, None)
+    """
+
     activations: np.ndarray  # (n, 5)
     positions: np.ndarray  # (n, N, 3) mm
     elbow_angles: np.ndarray  # (n,) deg

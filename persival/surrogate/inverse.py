@@ -1,4 +1,4 @@
-"""The inverse problem of SPEC 5: least-effort activations for an elbow angle.
+"""The inverse problem (docs/theory.md, section 6): least-effort activations for an elbow angle.
 
 ``alpha_opt(Theta) = argmin_{alpha in [0,1]^5} |Theta - theta(alpha)| + w sum(alpha)`` (w = 0.05,
 theta in degrees) on the SG surrogate of the elbow angle. The absolute value is not smooth;
@@ -24,7 +24,7 @@ from persival.vocabulary import ELBOW_ANGLE_BOUNDS_DEG
 
 __all__ = ["InverseSolution", "InverseProblem", "EFFORT_WEIGHT"]
 
-#: SPEC 5: weight of the effort sum(alpha) against one degree of angle error
+#: docs/theory.md, 6.1: weight of the effort sum(alpha) against one degree of angle error
 EFFORT_WEIGHT = 0.05
 
 
@@ -58,7 +58,8 @@ def _check_targets(targets) -> np.ndarray:
 
 
 class InverseProblem:
-    """SPEC 5 on any model with ``predict_angle(alpha) -> (m,)`` and ``angle_gradient(alpha) -> (m, 5)``."""
+    """Least effort (docs/theory.md, 6.1) on any model with ``predict_angle(alpha) -> (m,)`` and
+    ``angle_gradient(alpha) -> (m, 5)``."""
 
     def __init__(self, angle_model, effort_weight: float = EFFORT_WEIGHT, n_candidates: int = 4096,
                  seed: int = 0) -> None:

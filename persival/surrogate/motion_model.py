@@ -1,8 +1,8 @@
-"""The motion-and-load activation model (SPEC 5, "Beyond the paper"; issue 12).
+"""The motion-and-load activation model (docs/theory.md, 6.4; beyond the paper).
 
 ``(Theta, dTheta/dt, d2Theta/dt2, load) -> alpha`` from the per-muscle FE moment tables
 (:mod:`persival.tables.moment_table`). The hinge's equation of motion about the elbow
-(flexion positive, SPEC 3.3) is ``I(load) Theta'' = sum_m M_m(Theta, a_m) + M_g(Theta) +
+(flexion positive, docs/theory.md, 3.1) is ``I(load) Theta'' = sum_m M_m(Theta, a_m) + M_g(Theta) +
 M_load(Theta) + M_p(Theta)``, so the muscles must supply the required moment
 
     M_req = -(M_g + M_load + M_p) + I(load) Theta'',   M_load = -load g d sin(Theta),
@@ -58,7 +58,7 @@ def _moments_at(V, levels, a):
 
 
 def least_effort(V, levels, required, iterations: int = 90):
-    """min sum a^2 s.t. sum_m M_m(a_m) = required, a in [0, 1]^5, vectorized (SPEC 5).
+    """min sum a^2 s.t. sum_m M_m(a_m) = required, a in [0, 1]^5, vectorized (docs/theory.md, 6.4).
 
     Dual bisection on the multiplier lam (the per-muscle response is monotone in lam), then a
     bisection along the segment between the two last responses, which closes any duality gap
@@ -145,11 +145,11 @@ class MotionActivationModel:
         return m
 
     def required_moment(self, motion) -> np.ndarray:
-        """M_req (N mm) of the muscles for (angle, velocity, acceleration, load) rows (SPEC 5)."""
+        """M_req (N mm) of the muscles for (angle, velocity, acceleration, load) rows (docs/theory.md, 6.4)."""
         return self._required(self._check(motion), np, self.base)
 
     def _required(self, m, xp, base):
-        """The SPEC 5 moment balance, written once for numpy and torch (``xp``)."""
+        """The moment balance of docs/theory.md, 6.4, written once for numpy and torch (``xp``)."""
         p = self.params
         theta, acc, load = m[:, 0], m[:, 2], m[:, 3]
         base = self._interp_theta(theta, base, xp)

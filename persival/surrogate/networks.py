@@ -1,4 +1,4 @@
-"""The network architectures of SPEC 6: the paper's exponential net and the POD net.
+"""The network architectures (docs/theory.md, 7.2 and 7.3): the paper's exponential net and the POD net.
 
 Both map activations (b, 5) to *normalized* targets while training, and both can be folded
 into one plain graph ``alpha -> positions (b, N, 3) mm [, elbow angle (b, 1) deg]`` for
@@ -21,12 +21,12 @@ from torch import nn
 
 __all__ = ["ACTIVATIONS", "mlp", "paper_widths", "PaperNet", "PodNet", "pod_basis", "count_parameters"]
 
-PAPER_NODES, PAPER_MID = 2809, 700  # SPEC 6: the paper's output and middle widths
+PAPER_NODES, PAPER_MID = 2809, 700  # docs/theory.md, 7.2: the paper's output and middle widths
 ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "silu": nn.SiLU, "elu": nn.ELU}
 
 
 def paper_widths(n_in: int, n_mid: int, n_out: int, n_hidden: int = 5) -> list[int]:
-    """SPEC 6: w(s) = a e^(b s) + c through w(0) = n_in, w(1/2) = n_mid, w(1) = n_out, at s = n/(n_hidden+1)."""
+    """docs/theory.md, 7.2: w(s) = a e^(b s) + c through w(0) = n_in, w(1/2) = n_mid, w(1) = n_out, at s = n/(n_hidden+1)."""
     if not n_in < n_mid < n_out:
         raise ValueError(f"need n_in < n_mid < n_out, got {n_in}, {n_mid}, {n_out}")
     q = (n_out - n_mid) / (n_mid - n_in)
@@ -56,7 +56,7 @@ class PaperNet(nn.Module):
 
     def __init__(self, n_nodes: int, activation: str = "relu", n_mid: int | None = None, n_hidden: int = 5) -> None:
         super().__init__()
-        # SPEC 6: n_mid = 700 for the paper's 2809 nodes; other meshes keep that ratio
+        # docs/theory.md, 7.2: n_mid = 700 for the paper's 2809 nodes; other meshes keep that ratio
         n_mid = n_mid if n_mid is not None else max(6, round(n_nodes * PAPER_MID / PAPER_NODES))
         self.config = {"arch": "paper", "n_nodes": n_nodes, "activation": activation, "n_mid": n_mid,
                        "n_hidden": n_hidden}

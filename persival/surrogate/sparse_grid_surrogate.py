@@ -1,4 +1,4 @@
-"""The SG surrogate of a campaign (SPEC 4): alpha -> muscle surface positions and the elbow angle.
+"""The SG surrogate of a campaign (docs/theory.md, section 5): alpha -> muscle surface positions and the elbow angle.
 
 Reads a campaign store (or a :class:`~persival.surrogate.dataset.Dataset` of one) whose design
 is a regular sparse grid, interpolates every surface node's position of the chosen muscles and

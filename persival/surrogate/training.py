@@ -1,4 +1,4 @@
-"""Training of the networks (SPEC 6): k-fold cross-validation, best-by-validation, resumable.
+"""Training of the networks (docs/theory.md, 7.5): k-fold cross-validation, best-by-validation, resumable.
 
 Every fold trains a fresh net for ``epochs`` epochs (Adam, cosine learning rate, MSE loss on
 the net's targets) and reports, per epoch, the training loss, the validation loss and the
@@ -39,7 +39,7 @@ class TrainingConfig:
     max_rank: int = 48
     hidden: list[int] = field(default_factory=lambda: [64, 64, 64])
     # paper net
-    n_mid: int | None = None  # None: 700 / 2809 of the node count (SPEC 6)
+    n_mid: int | None = None  # None: 700 / 2809 of the node count (docs/theory.md, 7.2)
 
     def __post_init__(self) -> None:
         if self.arch not in ("paper", "pod"):

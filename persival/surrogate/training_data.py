@@ -1,4 +1,4 @@
-"""Training data for the networks (SPEC 6): SG evaluations at alpha_opt(Theta) and at random alpha.
+"""Training data for the networks (docs/theory.md, 7.4): SG evaluations at alpha_opt(Theta) and at random alpha.
 
 The paper trains on SG deformations at the optimal activations of sampled angles; a network
 trained on that curve alone has never seen the rest of [0,1]^5, where a viewer's activation

@@ -184,7 +184,7 @@ def _print_table(console, table, seconds: float) -> None:
 
 
 def _register_moments(app: typer.Typer) -> None:
-    """``persival moments``: the per-muscle FE moment table (issue 17; SPEC 3.3, 8)."""
+    """``persival moments``: the per-muscle FE moment table (docs/theory.md, 4.5)."""
 
     @app.command("moments")
     def moments(

@@ -1,7 +1,7 @@
-"""Per-muscle moment tables of the FE arm over (theta, a_m) (SPEC 3.3, SPEC 8; issue 17).
+"""Per-muscle moment tables of the FE arm over (theta, a_m) (docs/theory.md, section 4).
 
 Without muscle-muscle contact every muscle is its own FE body whose state, tension T and moment
-about the hinge depend only on the elbow angle theta and its own activation a_m (SPEC 3.3), so
+about the hinge depend only on the elbow angle theta and its own activation a_m (docs/theory.md, 3.7), so
 the joint equilibrium of any activation vector is the scalar equation
 ``sum_m M_m(theta, a_m) + M_gravity(theta) + M_passive_joint(theta) = 0`` with
 ``M_m = -(T_m dL_m/dtheta + dPi_c/dtheta)`` (flexion positive; the second term is the work of the
@@ -80,7 +80,7 @@ def _next_state(unit, theta_deg: float, activation: float, state, previous):
 
 
 def sweep_muscle(arm, muscle, angles, activation: float, max_step_deg: float = 10.0, start=None) -> dict:
-    """One muscle's FE equilibria along ``angles`` (deg) at a fixed activation (SPEC 3.3).
+    """One muscle's FE equilibria along ``angles`` (deg) at a fixed activation (docs/theory.md, 4.1).
 
     Continuation along theta, each solve warm-started from its neighbour, in steps of at most
     ``max_step_deg`` (points between the asked angles are solved, not returned: short steps
@@ -133,7 +133,7 @@ class MomentTable:
     angles_deg: np.ndarray  # (n_theta,)
     levels: np.ndarray  # (n_a,) activation levels, increasing, 0 first
     tension: np.ndarray  # (5, n_theta, n_a) N
-    moments: np.ndarray  # (5, n_theta, n_a) M_m, N mm, flexion positive (SPEC 3.3)
+    moments: np.ndarray  # (5, n_theta, n_a) M_m, N mm, flexion positive (docs/theory.md, 3.1)
     moment_slopes: np.ndarray  # (5, n_theta, n_a) dM/dtheta, N mm/rad
     done: np.ndarray  # (5, n_a) bool: column computed
     fine_deg: np.ndarray  # (n_fine,) fine angle grid of the exact geometry and loads
@@ -168,7 +168,7 @@ class MomentTable:
         return np.interp(theta_deg, self.fine_deg, self.fine_joint)
 
     def level_moments(self, muscle: str, theta_deg) -> np.ndarray:
-        """(n, n_a): M_m(theta, a_j) at every activation level (Hermite in theta, SPEC 3.3)."""
+        """(n, n_a): M_m(theta, a_j) at every activation level (Hermite in theta, docs/theory.md, 4.2)."""
         from scipy.interpolate import CubicHermiteSpline
 
         m = MUSCLES.index(muscle)
@@ -243,7 +243,7 @@ class MomentTable:
 
 
 def empty_moment_table(arm, angles: np.ndarray, levels: np.ndarray) -> MomentTable:
-    """An empty table with the exact geometry and loads on the fine grid (SPEC 3.3)."""
+    """An empty table with the exact geometry and loads on the fine grid (docs/theory.md, 3.6)."""
     fine = np.arange(angles[0], angles[-1] + 1e-9, FINE_STEP_DEG)
     muscles = arm.spec.ordered_muscles()
     shape = (len(MUSCLES), len(angles), len(levels))
@@ -289,7 +289,7 @@ def resumable(out, model_hash: str, profile: str, angles, levels) -> MomentTable
 
 def build_moment_table(arm_or_profile, angles_deg, activations, progress=None, out: str | Path | None = None,
                        model_file: str | Path | None = None, muscles=None) -> MomentTable:
-    """FE moment table of every muscle on ``angles_deg`` x ``activations`` (SPEC 3.3, 8).
+    """FE moment table of every muscle on ``angles_deg`` x ``activations`` (docs/theory.md, 4.5).
 
     ``arm_or_profile``: an :class:`~persival.model.arm.ArmModel` or a profile name. With ``out``
     the table is saved after every (muscle, level) column and an existing file there is

@@ -1,6 +1,6 @@
 """Per-muscle response tables of the FE arm over (theta, a_m): moments, forces and node states.
 
-SPEC 3.3 / 8, issue 17. Without muscle-muscle contact every muscle is its own FE body whose
+docs/theory.md, section 4. Without muscle-muscle contact every muscle is its own FE body whose
 state depends on the elbow angle theta and its own activation a_m only, so a table of each
 muscle's FE equilibria on a (theta, a) grid answers the whole arm: the joint equilibrium of any
 activation vector is one scalar equation in the tabulated moments, and each muscle's shape at

@@ -1,4 +1,4 @@
-"""The FE arm's state for any activation vector from its response tables (SPEC 8, issue 17).
+"""The FE arm's state for any activation vector from its response tables (docs/theory.md, 4.3 and 4.4).
 
 Two paths, both from :class:`~persival.tables.response_table.ResponseTable`:
 
