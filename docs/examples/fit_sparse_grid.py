@@ -20,14 +20,14 @@ from persival.campaign.runner import INLINE, run_campaign
 from persival.campaign.simulator import SimulatorSpec
 from persival.evaluate.metrics import state_errors
 from persival.surrogate.dataset import Dataset
-from persival.surrogate.surface_surrogate import SurfaceSurrogate
+from persival.surrogate.sparse_grid_surrogate import SparseGridSurrogate
 
 out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(tempfile.mkdtemp(prefix="persival-example-"))
 simulator = SimulatorSpec("analytic")
 run_campaign(out / "campaign.zarr", Design.sparse_grid(1), simulator, scheduler=INLINE, progress=False)
 run_campaign(out / "held_out.zarr", Design.random(20, seed=1), simulator, scheduler=INLINE, progress=False)
 
-sg = SurfaceSurrogate(muscles=None).fit(out / "campaign.zarr")  # every muscle + the elbow angle
+sg = SparseGridSurrogate(muscles=None).fit(out / "campaign.zarr")  # every muscle + the elbow angle
 sg.save(out / "sg")
 test = Dataset.from_store(out / "held_out.zarr")
 errors = state_errors(sg.predict(test.activations), test.positions, test.displacements)

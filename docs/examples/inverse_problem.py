@@ -16,12 +16,12 @@ from persival.campaign.design import Design
 from persival.campaign.runner import INLINE, run_campaign
 from persival.campaign.simulator import SimulatorSpec
 from persival.surrogate.inverse import InverseProblem
-from persival.surrogate.surface_surrogate import SurfaceSurrogate
+from persival.surrogate.sparse_grid_surrogate import SparseGridSurrogate
 from persival.vocabulary import ABBREVIATIONS
 
 out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(tempfile.mkdtemp(prefix="persival-example-"))
 run_campaign(out / "campaign.zarr", Design.sparse_grid(1), SimulatorSpec("analytic"), scheduler=INLINE, progress=False)
-sg = SurfaceSurrogate(muscles="biceps").fit(out / "campaign.zarr")
+sg = SparseGridSurrogate(muscles="biceps").fit(out / "campaign.zarr")
 
 problem = InverseProblem(sg)
 low, high = problem.reachable_range()
