@@ -58,13 +58,14 @@ STAGES = [
     ("tables", "the FE arm's per-muscle response tables (built once per model)", []),
     ("fe", "three FE equilibria of the arm (hanging, biceps 0.5, flexors 1)", ["model", "tables"]),
     ("campaign", "sparse-grid campaign + random held-out states", ["tables"]),
+    ("structured", "per-muscle shape and moment models from the tables: the deployed model", ["tables", "campaign"]),
     ("sg", "B-spline sparse grid of five muscle surfaces + elbow angle", ["campaign"]),
     ("inverse", "least-effort activations: the angle activation model", ["sg"]),
     ("motion", "motion-and-load activation model from the FE moments", ["sg", "tables"]),
     ("data", "SG training data at alpha_opt(Theta) and random alpha", ["sg", "inverse"]),
     ("train", "POD network (five muscles) and the paper's network (biceps)", ["data"]),
-    ("export", "ONNX models + metadata.json", ["train", "inverse", "motion"]),
-    ("evaluate", "the paper's accuracy and speed tables", ["export", "campaign", "sg", "train", "data"]),
+    ("export", "ONNX models + metadata.json", ["structured", "train", "inverse", "motion"]),
+    ("evaluate", "the paper's accuracy and speed tables", ["export", "campaign", "structured", "sg", "train", "data"]),
     ("report", "HTML report", ["evaluate", "fe", "model"]),
 ]
 

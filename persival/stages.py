@@ -160,6 +160,30 @@ def campaign(out: Path, config, console) -> dict:
     return stores
 
 
+def structured(out: Path, config, console) -> dict:
+    """The deployed model: per-muscle shape and moment models fitted to the response tables."""
+    if config.simulator != "arm":
+        why = "the structured surrogate is fitted to the FE arm's response tables (the campaign ran the analytic stand-in)"
+        console.print(f"  [yellow]skipped[/yellow]: {why}")
+        return {"skipped": why}
+    from persival.surrogate.dataset import Dataset
+    from persival.surrogate.stage import fit_structured
+
+    surrogate = fit_structured(out / "campaign" / "held_out.zarr", out / "structured", config.profile)
+    meta = surrogate.metadata
+    held = Dataset.from_store(out / "campaign" / "held_out.zarr")
+    positions, angles = surrogate.predict_with_angle(held.activations)
+    errors = np.linalg.norm(positions - held.positions, axis=2)
+    check = {"states": len(held), "max_ae_mm": float(errors.max()), "mae_mm": float(errors.mean()),
+             "max_angle_error_deg": float(np.abs(angles - held.elbow_angles).max())}
+    console.print(f"  fitted from the tables in {meta['fit_seconds']:.1f} s; POD modes "
+                  + ", ".join(f"{k} {v}" for k, v in meta["modes"].items())
+                  + f"; against {check['states']} held-out FE states: worst MaxAE {check['max_ae_mm']:.2f} mm, "
+                  f"mean MAE {check['mae_mm']:.3f} mm, worst angle error {check['max_angle_error_deg']:.2f} deg")
+    return {"modes": meta["modes"], "parameters": meta["parameters"], "fit_seconds": meta["fit_seconds"],
+            "grid": meta["grid"], "held_out_fe": check}
+
+
 def sg(out: Path, config, console) -> dict:
     from persival.surrogate.stage import fit_sparse_grid
 
@@ -254,6 +278,7 @@ def export(out: Path, config, console) -> dict:
     from persival.deploy.export import export_model
     from persival.surrogate.activation_model import AngleActivationModel
     from persival.surrogate.base import load_surrogate
+    from persival.surrogate.dataset import Dataset
 
     network = load_surrogate(out / "networks" / "pod")
     model = AngleActivationModel.load(out / "inverse" / "activation_model.json")
@@ -262,11 +287,26 @@ def export(out: Path, config, console) -> dict:
         from persival.surrogate.motion_model import MotionActivationModel
 
         motion_model = MotionActivationModel.load(out / "motion")
-    meta = export_model(network, out / "export", activation_model=model, motion_model=motion_model)
-    for tier, v in meta["models"]["deformation"]["variants"].items():
-        console.print(f"  {tier:8s} {v['file']:25s} {v['bytes'] / 1e6:5.3f} MB, |ONNX - torch| <= "
-                      f"{v['max_abs_diff_vs_torch']['positions']:.1e} mm")
-    return {"variants": meta["models"]["deformation"]["variants"], "n_nodes": meta["n_nodes"]}
+    held = out / "campaign" / "held_out.zarr"
+    held = Dataset.from_store(held).select(list(network.surfaces.names)) if held.exists() else None
+    # the deployed model (export/): the structured surrogate where the run has one, else the POD net
+    exports = {"export": network}
+    if (out / "structured" / "surrogate.json").is_file():
+        exports = {"export": load_surrogate(out / "structured"), "export_pod": network}
+    summary = {}
+    for folder, surrogate in exports.items():
+        meta = export_model(surrogate, out / folder, activation_model=model, motion_model=motion_model, held_out=held)
+        deployed = meta["provenance"].get("deployed", {})
+        console.print(f"  {folder}/: {surrogate.metadata.get('arch')}{' (deployed)' if folder == 'export' else ''}" + "".join(
+            f"; {tier} {v['bytes'] / 1e6:.3f} MB, |ONNX - torch| <= {v['max_abs_diff_vs_torch']['positions']:.1e} mm"
+            for tier, v in meta["models"]["deformation"]["variants"].items()))
+        if deployed:
+            h = deployed["held_out_fe"]
+            console.print(f"    vs {h['states']} held-out FE states: worst MaxAE {h['max_ae_mm']:.2f} mm, mean MAE "
+                          f"{h['mae_mm']:.3f} mm, worst angle error {h.get('max_angle_error_deg', float('nan')):.2f} deg")
+        summary[folder] = {"model": surrogate.metadata.get("arch"), "variants": meta["models"]["deformation"]["variants"],
+                           "n_nodes": meta["n_nodes"], "deployed": deployed or None}
+    return summary
 
 
 def evaluate(out: Path, config, console) -> dict:
@@ -289,12 +329,13 @@ def report(out: Path, config, console) -> dict:
 SETTINGS = {
     "model": ["profile"], "tables": ["profile", "simulator"], "fe": ["profile", "simulator"],
     "campaign": ["profile", "simulator", "level", "held_out", "campaign_store", "held_out_store", "seed"],
+    "structured": ["profile"],
     "sg": [], "inverse": [], "motion": ["moment_table", "profile"], "data": ["samples", "angle_fraction", "seed"],
     "train": ["pod_folds", "pod_epochs", "paper_folds", "paper_epochs", "seed"], "export": [],
     "evaluate": ["seed", "bench"], "report": [],
 }
 RUNNERS = {"model": model, "tables": tables,
-           "fe": fe, "campaign": campaign, "sg": sg, "inverse": inverse, "motion": motion, "data": data,
+           "fe": fe, "campaign": campaign, "structured": structured, "sg": sg, "inverse": inverse, "motion": motion, "data": data,
            "train": train, "export": export, "evaluate": evaluate, "report": report}
 
 

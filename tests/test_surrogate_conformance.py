@@ -55,10 +55,10 @@ def test_one_interface(label, surrogates, tmp_path):
     alpha = np.array([[0.2, 0.1, 0.0, 0.3, 0.1], [0.6, 0.5, 0.4, 0.0, 0.0]])
     positions, angles = surrogate.predict_with_angle(alpha)
     assert positions.shape == (2, surrogate.surfaces.n_nodes, 3) and np.isfinite(positions).all()
-    assert np.allclose(surrogate.predict(alpha), positions, rtol=0, atol=1e-9)
-    assert np.allclose(surrogate.predict(alpha[0]), positions[:1], rtol=0, atol=1e-9)  # one vector: a batch of one
+    assert np.allclose(surrogate.predict(alpha), positions, rtol=0, atol=1e-4)
+    assert np.allclose(surrogate.predict(alpha[0]), positions[:1], rtol=0, atol=1e-4)  # one vector: a batch of one
     if surrogate.has_angle:
-        assert angles.shape == (2,) and np.allclose(surrogate.predict_angle(alpha), angles, rtol=0, atol=1e-9)
+        assert angles.shape == (2,) and np.allclose(surrogate.predict_angle(alpha), angles, rtol=0, atol=1e-4)
     else:
         assert angles is None
         with pytest.raises(ValueError, match="no elbow-angle output"):

@@ -38,6 +38,7 @@ def _session(path: Path):
     # thread pool per call would only add wake-up latency on a 2-core machine.
     opts.intra_op_num_threads = 1
     opts.inter_op_num_threads = 1
+    opts.log_severity_level = 3  # a graph's optional input (load_kg) is also an initializer: ORT warns at every load
     try:
         return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
     except Exception as exc:  # onnxruntime raises its own Fail/InvalidGraph types

@@ -47,11 +47,12 @@ def _register_serve(app: typer.Typer) -> None:
 def _register_export(app: typer.Typer) -> None:
     @app.command("export")
     def export(
-        network: Path = typer.Option(..., "--network", help="Trained network folder (persival train)."),
+        network: Path = typer.Option(..., "--network", help="Trained network folder (persival train) or structured "
+                                     "surrogate folder (persival surrogate fit-structured)."),
         out: Path = typer.Option(..., "--out", help="Export folder (ONNX tiers + metadata.json); replaced if it exists."),
         activation_model: Path = typer.Option(None, "--activation-model", help="activation_model.json (persival inverse --out)."),
     ) -> None:
-        """Export a trained network to ONNX (float32, float16, int8) with metadata.json (docs/deployment.md)."""
+        """Export a trained network (float32, float16, int8) or the structured surrogate (float32) to ONNX with metadata.json."""
         from persival.cli_errors import check_output_dir, user_errors
         from persival.deploy.export import export_model
         from persival.surrogate.activation_model import AngleActivationModel
@@ -60,8 +61,9 @@ def _register_export(app: typer.Typer) -> None:
         with user_errors():
             check_output_dir(out)
             surrogate = load_surrogate(network)
-            if surrogate.kind != "network":
-                raise ValueError(f"{network} holds a {surrogate.kind} surrogate; export takes a trained network")
+            if not hasattr(surrogate, "deployable"):
+                raise ValueError(f"{network} holds a {surrogate.kind} surrogate; export takes a trained network or a "
+                                 "structured surrogate")
             model = AngleActivationModel.load(activation_model) if activation_model is not None else None
             meta = export_model(surrogate, out, activation_model=model)
         for tier, v in meta["models"]["deformation"]["variants"].items():

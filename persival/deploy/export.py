@@ -51,7 +51,9 @@ def _onnx(module: torch.nn.Module, example, path: Path, input_name, output_names
 def _session(path: Path):
     import onnxruntime as ort
 
-    return ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    options = ort.SessionOptions()
+    options.log_severity_level = 3  # the optional load input is also an initializer: ORT warns about it
+    return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
 
 
 def _optional_load_input(path: Path) -> None:
@@ -130,8 +132,11 @@ def _export_activation_model(model, out: Path) -> dict:
 
 
 def export_model(surrogate, out: str | Path, activation_model=None, motion_model=None, accuracy: dict | None = None,
-                 n_probe: int = 64, seed: int = 0) -> dict:
-    """Write the export folder for a fitted :class:`NetworkSurrogate`; returns the metadata."""
+                 n_probe: int = 64, seed: int = 0, held_out=None, name: str | None = None) -> dict:
+    """Write the export folder for a fitted surrogate with ``deployable()`` (a network or the
+    structured surrogate); returns the metadata. ``held_out``: a Dataset of FE states to measure
+    the exported float32 file against (metadata provenance ``deployed``); ``name``: the model's
+    name there (default: its architecture)."""
     from persival.campaign.skeleton import skeleton_for
 
     out = Path(out)
@@ -175,6 +180,11 @@ def export_model(surrogate, out: str | Path, activation_model=None, motion_model
                        "persival_version": persival.__version__, "torch": torch.__version__, "opset": OPSET,
                        "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")},
     }
+    if held_out is not None:
+        from persival.deploy.held_out import held_out_accuracy
+
+        metadata["provenance"]["deployed"] = {"model": name or surrogate.metadata.get("arch"),
+                                              "held_out_fe": held_out_accuracy(tmp / "deformation.onnx", held_out)}
     (tmp / "metadata.json").write_text(json.dumps(metadata, default=float))
     if out.exists():
         shutil.rmtree(out)

@@ -75,14 +75,20 @@ def _paper_architecture_rows(activation, threads, reps, budget_s) -> list[dict]:
 
 
 def _onnx_rows(run: LoadedRun, truth, reps, budget_s) -> list[dict]:
+    rows = []
+    for export in (run.layout.export, run.layout.export_pod):
+        if (export / "metadata.json").is_file():
+            rows += _export_rows(export, run, truth, reps, budget_s)
+    return rows
+
+
+def _export_rows(export, run: LoadedRun, truth, reps, budget_s) -> list[dict]:
     import onnxruntime as ort
 
     from persival.deploy.artifacts import DeployedModel
 
-    export = run.layout.export
-    if not (export / "metadata.json").is_file():
-        return []
     deployed = DeployedModel(export)  # checks the folder once (contract: docs/deployment.md)
+    role = "deployed" if export == run.layout.export else "exported"
     rows = []
     for tier, variant in deployed.metadata["models"]["deformation"]["variants"].items():
         path = export / variant["file"]
@@ -90,6 +96,7 @@ def _onnx_rows(run: LoadedRun, truth, reps, budget_s) -> list[dict]:
         for threads in (1, 2):
             opts = ort.SessionOptions()
             opts.intra_op_num_threads, opts.inter_op_num_threads = threads, 1
+            opts.log_severity_level = 3  # an optional input (the load) is also an initializer: ORT warns
             sess = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
 
             def predict(alpha, sess=sess):
@@ -97,7 +104,7 @@ def _onnx_rows(run: LoadedRun, truth, reps, budget_s) -> list[dict]:
             accuracy = accuracy or heldout_accuracy(predict, truth, deployed_surfaces(run), "all")
             for batch in BATCHES:
                 x = np.random.default_rng(batch).uniform(0, 1, (batch, 5)).astype(np.float32)
-                rows.append(_row(f"deployed {deployed.metadata['models']['deformation'].get('architecture')} "
+                rows.append(_row(f"{role} {deployed.metadata['models']['deformation'].get('architecture')} "
                                  f"ONNX {tier}", f"onnxruntime {ort.__version__}", threads, batch,
                                  time_calls(lambda x=x, p=predict: p(x), reps, 20, budget_s),
                                  file_mb=path.stat().st_size / 1e6, **accuracy))

@@ -65,6 +65,14 @@ def _net_rows(run, truth, tested_on) -> list[dict]:
     return rows
 
 
+def _structured_rows(run, truth, tested_on) -> list[dict]:
+    """The structured surrogate (per-muscle models from the response tables), when the run has one."""
+    if run.structured is None:
+        return []
+    positions, angle = run.structured.predict_with_angle(truth.activations)
+    return [_row("structured (tables)", "all", tested_on, positions, truth, run.sg.surfaces, angle)]
+
+
 def _table_rows(layout, run, truth, tested_on) -> list[dict]:
     """The FE arm's table-only path (docs/theory.md, 4.4: five 2-D interpolations and a scalar root)
     on the same held-out activations, when the run solved them that way too."""
@@ -85,7 +93,8 @@ def error_propagation_table(run: LoadedRun, n_states: int = 25) -> dict:
     label = held.source.get("label", "held-out states")
     scopes = sorted({s for net in run.networks.values() for s in network_scopes(net)}, key=lambda s: s != "all")
     held_on = f"{len(held)} held-out states"
-    rows = _sg_rows(run, held, scopes, held_on) + _net_rows(run, held, held_on) + _table_rows(layout, run, held, held_on)
+    rows = (_sg_rows(run, held, scopes, held_on) + _net_rows(run, held, held_on) + _structured_rows(run, held, held_on)
+            + _table_rows(layout, run, held, held_on))
     sg_mae = {r["scope"]: r["mean MAE_mm"] for r in rows if r["surrogate"] == "SG"}
     for r in rows[len(scopes):]:
         r["added_pct"] = 100.0 * (r["mean MAE_mm"] / sg_mae[r["scope"]] - 1.0) if sg_mae[r["scope"]] > 0 else None

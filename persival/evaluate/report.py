@@ -157,6 +157,7 @@ def write_report(out: str | Path, command: str | None = None) -> Path:
     results = {"format": "persival-results", "run": str(out), "source": source,
                "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"), "provenance": provenance,
                "configuration": configs, "tables": tables, "figures": [c for c, _ in figures],
-               "stages": json.loads(summary.read_text()) if summary.is_file() else None}
+               "stages": json.loads(summary.read_text()) if summary.is_file() else None,
+               "deployed": evaluation.get("deployed")}
     (report / "results.json").write_text(json.dumps(results, indent=1, default=float))
     return index

@@ -52,8 +52,19 @@ class RunLayout:
         return self.root / "networks" / label
 
     @property
+    def structured(self) -> Path:
+        """The structured surrogate (FE-arm runs): the deployed model."""
+        return self.root / "structured"
+
+    @property
     def export(self) -> Path:
+        """The deployed model's export (the viewer's and the server's default)."""
         return self.root / "export"
+
+    @property
+    def export_pod(self) -> Path:
+        """The POD network's export, when the deployed model is the structured one."""
+        return self.root / "export_pod"
 
     @property
     def evaluate(self) -> Path:
@@ -85,6 +96,7 @@ class LoadedRun:
     sg: object  # SparseGridSurrogate of all muscles
     networks: dict = field(default_factory=dict)  # label -> NetworkSurrogate
     activation_model: object | None = None
+    structured: object | None = None  # StructuredSurrogate (FE-arm runs)
 
     @property
     def source_label(self) -> str:
@@ -109,7 +121,8 @@ def load_run(out: str | Path) -> LoadedRun:
                 raise ValueError(f"network {label} and the SG disagree on the node count of {name}: "
                                  "they were not made from the same model")
     model = AngleActivationModel.load(layout.activation_model) if layout.activation_model.is_file() else None
-    return LoadedRun(layout, sg, networks, model)
+    structured = load_surrogate(layout.structured) if (layout.structured / "surrogate.json").is_file() else None
+    return LoadedRun(layout, sg, networks, model, structured)
 
 
 def network_scopes(net) -> list[str]:

@@ -17,7 +17,7 @@ import time
 from importlib import metadata
 from pathlib import Path
 
-__all__ = ["evaluate_run", "run_bench", "environment", "default_command"]
+__all__ = ["evaluate_run", "run_bench", "environment", "default_command", "deployed_summary"]
 
 _PACKAGES = ("persival", "numpy", "scipy", "torch", "onnx", "onnxruntime", "zarr", "pyvista", "matplotlib",
              "tensorflow-cpu", "tensorflow")
@@ -37,6 +37,15 @@ def environment() -> dict:
             "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
                         "cpu_count": os.cpu_count(), "node": platform.node()},
             "date": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")}
+
+
+def deployed_summary(export: Path) -> dict | None:
+    """``{"model": NAME, "held_out_fe": {...}}``: the export's own measurement of the deployed file
+    against the held-out FE states (persival.deploy.held_out), or None without one."""
+    metadata = Path(export) / "metadata.json"
+    if not metadata.is_file():
+        return None
+    return json.loads(metadata.read_text()).get("provenance", {}).get("deployed")
 
 
 def default_command(out, what: str = "evaluate") -> str:
@@ -212,7 +221,8 @@ def evaluate_run(out: str | Path, progress=True, bench: bool = True, peer: bool 
                                        command=command)
     summary = {"run": str(Path(out)), "source": run.source_label, "tables": sorted(tables),
                "figures": {k: str(v) for k, v in figures.items()}, "skipped": skipped,
-               "wall_time_s": time.perf_counter() - t0, "provenance": {"command": command, **environment()}}
+               "wall_time_s": time.perf_counter() - t0, "provenance": {"command": command, **environment()},
+               "deployed": deployed_summary(run.layout.export)}
     (folder / "evaluation.json").write_text(json.dumps(summary, indent=1))
     return {"tables": tables, "figures": figures, "skipped": skipped, "wall_time_s": summary["wall_time_s"]}
 

@@ -41,6 +41,31 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         console.print(f"fitted level-{meta['level']} grid ({meta['grid_points']} points) to {surrogate.n_nodes} "
                       f"{surrogate.muscle} nodes + elbow angle; wrote {out}")
 
+    @surrogate_app.command("fit-structured")
+    def fit_structured_command(
+        store: Path = typer.Option(..., "--store", help="Campaign store of the FE arm: the surfaces to answer."),
+        out: Path = typer.Option(Path("results/structured"), "--out", help="Output directory."),
+        profile: str = typer.Option("quick", "--profile", help="Mesh profile of the arm (its response tables)."),
+        model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+        tables: Path | None = typer.Option(None, "--tables", help="Response-table folder (default: the model's cache)."),
+        tolerance: float = typer.Option(0.05, "--tolerance", min=1e-6, help="POD truncation, mm: every tabulated "
+                                        "surface kept within it."),
+    ) -> None:
+        """Fit the structured surrogate (per-muscle shape and moment models + the elbow's equilibrium) to the response tables."""
+        from rich.console import Console
+
+        from persival.campaign.store import StoreError
+        from persival.surrogate.stage import fit_structured
+
+        console = Console()
+        with user_errors(StoreError, out=out):
+            check_output_dir(out)
+            surrogate = fit_structured(store, out, profile, model, tables, tolerance)
+        meta = surrogate.metadata
+        console.print(f"fitted {len(meta['muscles'])} muscles from the tables in {meta['fit_seconds']:.1f} s: POD modes "
+                      + ", ".join(f"{k} {v}" for k, v in meta["modes"].items())
+                      + f"; {meta['parameters']} parameters; wrote {out}")
+
     @surrogate_app.command("adapt")
     def adapt(
         out: Path = typer.Option(
@@ -195,6 +220,7 @@ def _register_inverse_and_networks(app: typer.Typer) -> None:
         batch_size: int = typer.Option(64, "--batch-size", min=1),
         learning_rate: float = typer.Option(1e-3, "--learning-rate", min=0.0),
         rank: int = typer.Option(None, "--rank", min=1, help="POD rank (default: by the energy criterion)."),
+        device: str = typer.Option("auto", "--device", help="auto (CUDA when present, else CPU), cpu or cuda."),
     ) -> None:
         """Train the paper network or the POD network (k-fold CV, best by validation loss)."""
         from persival.surrogate.stage import parse_muscles, train_network
@@ -204,9 +230,12 @@ def _register_inverse_and_networks(app: typer.Typer) -> None:
             check_output_dir(out)
             config = TrainingConfig(arch=arch, folds=folds, epochs=epochs, activation=activation, batch_size=batch_size,
                                     learning_rate=learning_rate, rank=rank)
+            from persival.surrogate.training import resolve_device
+
+            resolve_device(device)  # a wrong --device is refused before the data is read
             bar, advance = _progress_bar(f"training ({arch})")
             with bar:
-                surrogate = train_network(data, out, config, parse_muscles(muscle), advance)
+                surrogate = train_network(data, out, config, parse_muscles(muscle), advance, device)
         best = surrogate.metadata["training"]["best"]
         typer.echo(f"best validation loss {best['val_loss']:.4g} (fold {best['fold']}, epoch {best['epoch']}), "
                    f"{surrogate.metadata['parameters']} parameters; wrote {out} (history.png)")

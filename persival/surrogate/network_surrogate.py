@@ -33,12 +33,13 @@ class NetworkSurrogate(Surrogate):
         self.history: list[dict] = []
         self._graph = None
 
-    def fit(self, dataset: Dataset, out: str | Path | None = None, progress=None) -> NetworkSurrogate:
-        """Train on ``dataset``; ``out`` holds the checkpoint (resume) and then the saved surrogate."""
+    def fit(self, dataset: Dataset, out: str | Path | None = None, progress=None, device: str = "auto") -> NetworkSurrogate:
+        """Train on ``dataset``; ``out`` holds the checkpoint (resume) and then the saved surrogate;
+        ``device``: auto (CUDA when present), cpu or cuda."""
         import tempfile
 
         work = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="persival-train-"))
-        self.net, summary = train(dataset, self.config, work, progress)
+        self.net, summary = train(dataset, self.config, work, progress, device)
         self.surfaces = dataset.surfaces
         self.history = summary.pop("history")
         self.metadata = {"kind": self.kind, "arch": self.config.arch, "net": self.net.config,

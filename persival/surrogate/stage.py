@@ -18,7 +18,7 @@ from persival.surrogate.inverse import InverseProblem, InverseSolution
 from persival.surrogate.sparse_grid_surrogate import SparseGridSurrogate
 
 __all__ = ["parse_muscles", "fit_sparse_grid", "solve_inverse", "build_activation_model", "make_training_data",
-           "train_network", "load_angle_surrogate"]
+           "train_network", "load_angle_surrogate", "fit_structured"]
 
 
 def parse_muscles(text: str | None):
@@ -33,6 +33,18 @@ def parse_muscles(text: str | None):
 
 def fit_sparse_grid(store: str | Path, out: str | Path, muscles=None, degree: int = 3) -> SparseGridSurrogate:
     surrogate = SparseGridSurrogate(muscles, degree).fit(store)
+    surrogate.save(out)
+    return surrogate
+
+
+def fit_structured(store: str | Path, out: str | Path, profile: str = "quick", model_file=None, tables=None,
+                   tolerance_mm: float = 0.05, progress=None):
+    """The structured surrogate of the FE arm, fitted to its response tables, answering the
+    surfaces of ``store`` (a campaign of the same arm: only its surfaces and model are read)."""
+    from persival.surrogate.structured.surrogate import StructuredSurrogate
+
+    data = Dataset.from_store(store)
+    surrogate = StructuredSurrogate(profile, model_file, tables, tolerance_mm).fit(data, progress)
     surrogate.save(out)
     return surrogate
 
@@ -72,7 +84,7 @@ def make_training_data(surrogate_dir: str | Path, activation_model: str | Path, 
     return generate_training_data(sg, model, out, n_samples, angle_fraction, seed, progress=progress)
 
 
-def train_network(data: str | Path, out: str | Path, config, muscles=None, progress=None):
+def train_network(data: str | Path, out: str | Path, config, muscles=None, progress=None, device: str = "auto"):
     """Train a network on a dataset folder (training data or a saved dataset); saves it in ``out``."""
     from persival.surrogate.network_surrogate import NetworkSurrogate
     from persival.surrogate.plots import plot_training_history
@@ -80,7 +92,7 @@ def train_network(data: str | Path, out: str | Path, config, muscles=None, progr
     dataset = Dataset.load(data)
     if muscles is not None:
         dataset = dataset.select(muscles)
-    surrogate = NetworkSurrogate(config).fit(dataset, out, progress)
+    surrogate = NetworkSurrogate(config).fit(dataset, out, progress, device)
     plot_training_history(surrogate.history, Path(out) / "history.png",
                           f"{config.arch} network on {dataset.source.get('label', 'data')}")
     return surrogate

@@ -83,7 +83,7 @@ def _save_atomic(obj, path: Path) -> None:
 def _epoch(net, optimizer, x, y, batch: int, generator) -> float:
     net.train()
     total = 0.0
-    for rows in torch.randperm(len(x), generator=generator).split(batch):
+    for rows in torch.randperm(len(x), generator=generator).to(x.device).split(batch):
         optimizer.zero_grad(set_to_none=True)
         loss = torch.mean((net.physical(net(x[rows])) - y[rows]) ** 2)
         loss.backward()
@@ -99,15 +99,27 @@ def _validate(net, x, y, u, chunk: int = 128) -> tuple[float, list[float]]:
     loss = float(torch.mean((net.physical(out) - y) ** 2))
     # the displacements in chunks: whole, four (n, 3N) temporaries a validation (75 MB each for
     # the main job's POD net) cost more than its training epoch
-    total = torch.zeros(3, dtype=torch.float64)
-    for rows in torch.arange(len(x)).split(chunk):
+    total = torch.zeros(3, dtype=torch.float64, device=x.device)
+    for rows in torch.arange(len(x), device=x.device).split(chunk):
         total += torch.abs(net.displacements(out[rows]) - u[rows]).sum(dim=(0, 1), dtype=torch.float64)
-    mae = total / (len(x) * u.shape[1])  # per coordinate, mm
+    mae = total.cpu() / (len(x) * u.shape[1])  # per coordinate, mm
     return loss, [float(v) for v in mae]
 
 
-def train(dataset, config: TrainingConfig, out: str | Path, progress=None):
-    """Train on ``dataset`` (its displacements and elbow angles); returns (best net, history)."""
+def resolve_device(device: str = "auto") -> torch.device:
+    """``auto``: CUDA when a GPU is there, else the CPU; ``cpu`` / ``cuda`` as asked (a missing GPU is an error)."""
+    if device not in ("auto", "cpu", "cuda"):
+        raise ValueError(f"device must be auto, cpu or cuda, got {device!r}")
+    if device == "cuda" and not torch.cuda.is_available():
+        raise ValueError("--device cuda: no CUDA device here (torch.cuda.is_available() is False); use auto or cpu")
+    return torch.device("cuda" if device == "cuda" or (device == "auto" and torch.cuda.is_available()) else "cpu")
+
+
+def train(dataset, config: TrainingConfig, out: str | Path, progress=None, device: str = "auto"):
+    """Train on ``dataset`` (its displacements and elbow angles); returns (best net, history).
+    ``device``: where the epochs run (:func:`resolve_device`); the result is a CPU net either way,
+    and the device is not part of the configuration (a checkpoint resumes on another one)."""
+    where = resolve_device(device)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
@@ -118,9 +130,9 @@ def train(dataset, config: TrainingConfig, out: str | Path, progress=None):
     state = _resume(checkpoint, config, dataset)
     template = build_net(config, u.shape[1], rank)
     template.fit_normalization(u, angles, pod)  # POD and scales from all training states, as deployed
-    x = torch.as_tensor(dataset.activations, dtype=torch.float32)
-    y = torch.as_tensor(template.targets(u, angles), dtype=torch.float32)
-    ut = torch.as_tensor(u)
+    x = torch.as_tensor(dataset.activations, dtype=torch.float32, device=where)
+    y = torch.as_tensor(template.targets(u, angles), dtype=torch.float32, device=where)
+    ut = torch.as_tensor(u, device=where)
     if state is None:
         state = {"config": asdict(config), "digest": dataset.digest(), "fold": 0, "epoch": 0, "net": None,
                  "optimizer": None, "best": None, "history": [], "wall_time_s": 0.0}
@@ -130,8 +142,8 @@ def train(dataset, config: TrainingConfig, out: str | Path, progress=None):
         generator.set_state(state["generator"])
     total_epochs = config.folds * config.epochs
     while state["fold"] < len(folds):
-        train_rows, val_rows = (torch.as_tensor(r) for r in folds[state["fold"]])
-        net = copy.deepcopy(template)
+        train_rows, val_rows = (torch.as_tensor(r, device=where) for r in folds[state["fold"]])
+        net = copy.deepcopy(template).to(where)
         optimizer = torch.optim.Adam(net.parameters(), lr=config.learning_rate)
         schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=config.epochs, eta_min=config.learning_rate / 50)
         if state["net"] is not None:  # resuming inside this fold
@@ -150,7 +162,7 @@ def train(dataset, config: TrainingConfig, out: str | Path, progress=None):
                                      "val_loss": val_loss, "val_mae_mm": mae})
             if state["best"] is None or val_loss < state["best"]["val_loss"]:
                 state["best"] = {"val_loss": val_loss, "fold": state["fold"], "epoch": state["epoch"],
-                                 "net": copy.deepcopy(net.state_dict())}
+                                 "net": {k: v.detach().to("cpu", copy=True) for k, v in net.state_dict().items()}}
             state.update(net=net.state_dict(), optimizer=optimizer.state_dict(), schedule=schedule.state_dict(),
                          generator=generator.get_state(), wall_time_s=state["wall_time_s"] + time.perf_counter() - t0)
             _save_atomic(state, checkpoint)

@@ -14,6 +14,7 @@ import typer
 from persival.cli_errors import check_output_dir, check_output_file, user_errors
 from persival.cli_values import parse_activations, parse_grid
 from persival.model.defaults import profiles_help
+from persival.tables.response_table import DEFAULT_LEVELS
 from persival.vocabulary import MUSCLES, N_ACTIVATIONS
 
 ACTIVATIONS_HELP = f"{N_ACTIVATIONS} comma-separated activations in [0, 1], in the order {', '.join(MUSCLES)}; e.g. 0.5,0,0,0,0."
@@ -32,7 +33,8 @@ def register(app: typer.Typer) -> None:
                                                 help="Also write the moments as a moment table (.npz, for `persival motion`)."),
         angles: str = typer.Option("-10:185:5", "--angles",
                                   help="Elbow angles, deg: START:STOP:STEP or a list (--angles=-10:185:5 when negative)."),
-        levels: str = typer.Option("0,0.25,0.5,0.75,1", "--levels", help="Activation levels from 0 to 1."),
+        levels: str = typer.Option(",".join(f"{v:g}" for v in DEFAULT_LEVELS), "--levels",
+                                   help="Activation levels from 0 to 1."),
         scheduler: str | None = typer.Option(None, "--scheduler",
                                              help="Dask scheduler address, or 'inline'; default: a LocalCluster."),
         workers: int | None = typer.Option(None, "--workers", help="LocalCluster worker processes (default: one per core)."),

@@ -5,7 +5,7 @@ interpolating cubic spline in its values) is a sum of *cardinal* functions, one 
 piecewise cubic on the same breakpoints. Storing their power-form coefficients per interval turns
 evaluation into one dense product, ``[indicator(x) * (t^3, t^2, t, 1)] @ C`` with ``t = x - x_i``:
 no gather and no data-dependent control flow, so the same arithmetic runs in numpy, in PyTorch
-and in an exported ONNX graph (docs/theory.md, "Structured surrogate").
+and in an exported ONNX graph (docs/theory.md 7.7).
 """
 
 from __future__ import annotations

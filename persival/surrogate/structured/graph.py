@@ -7,8 +7,8 @@ with dense products, comparisons and one-hot selections only (no gathers, no loo
 the data), and with few operators, since at batch 1 each costs about a microsecond: a sign scan
 brackets the stable root nearest the hanging arm, the bracket's table interval gives the
 balance as one cubic, and regula falsi plus a fixed number of Newton steps on that cubic
-converge it; every muscle's surface is then read at that angle (docs/theory.md, "Structured
-surrogate").
+converge it; every muscle's surface is then read at that angle (docs/theory.md
+7.7).
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ the same Hermite interpolation of their exact values and slopes at the table ang
 below 1e-3 N mm on 5-degree steps, moves the root by less than 1e-5 deg), so that on every table
 interval the whole balance is one cubic polynomial in theta. The elbow angle is its stable root
 (the balance turns from flexing to extending) nearest the hanging arm's angle, as on the FE path
-(docs/theory.md, "Joint equilibrium" and "Structured surrogate").
+(docs/theory.md 3.7 and 7.7).
 """
 
 from __future__ import annotations

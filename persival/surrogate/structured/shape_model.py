@@ -1,8 +1,8 @@
 """One muscle's surface as a smooth function of (theta, own activation), from its response table.
 
 The tabulated FE states (every table angle and activation level) are taken in the muscle's own
-frame, where the line of action is fixed, and reduced by POD (docs/theory.md, "Structured
-surrogate"): ``y = mean + c(theta, a) @ modes``. The coefficients are interpolated like the
+frame, where the line of action is fixed, and reduced by POD (docs/theory.md
+7.7): ``y = mean + c(theta, a) @ modes``. The coefficients are interpolated like the
 moments: cubic Hermite in theta through their values and slopes (the tables' du/dtheta
 projected on the modes), an interpolating cubic spline in the activation. The world position
 turns the own frame with the line of action, ``x = O + (y - O) Q(theta)^T``; Q's nine entries are

@@ -1,6 +1,6 @@
 """The structured surrogate: per-muscle shape and moment models and the elbow's equilibrium.
 
-The physics decomposes (docs/theory.md, "Structured surrogate"): each muscle's FE state depends
+The physics decomposes (docs/theory.md 7.7): each muscle's FE state depends
 on the elbow angle and its own activation only, and the elbow angle is the stable root of one
 scalar moment balance. So instead of learning the 5-D map alpha -> surfaces from a campaign, this
 surrogate is fitted from the FE arm's response tables: five 2-D moment models, five 2-D shape
@@ -55,6 +55,10 @@ class StructuredSurrogate(Surrogate):
         from persival.model.arm import ArmModel
         from persival.tables.open import open_tables
 
+        simulator = dataset.source.get("simulator")
+        if simulator not in (None, "arm"):
+            raise ValueError(f"the structured surrogate is fitted to the FE arm's response tables; the dataset holds "
+                             f"states of the {simulator!r} simulator (use a campaign of the arm)")
         t0 = time.perf_counter()
         arm = ArmModel(self.model_file, self.profile)
         if dataset.model_hash is not None and dataset.model_hash != arm.model_hash:
