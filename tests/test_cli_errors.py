@@ -50,6 +50,7 @@ CASES = [
     ("bench fe", ["--activation", "2"], "out of range", BOX),
     ("bench fe", ["--activation", "nan"], "not finite", BOX),
     ("bench fe", ["--backend", "nosuch"], "unknown backend", "unknown sparse solver backend"),
+    ("bench deployed", ["--run", "folder"], "a folder that is no run", "no sparse-grid surrogate"),
     ("bench fe", ["--mesh-size", "0"], "out of range", BOX),
     ("bench sg", ["--degree", "2"], "even degree", "positive odd integer"),
     ("bench sg", ["--level", "0"], "out of range", BOX),

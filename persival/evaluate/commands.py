@@ -200,6 +200,25 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             out.write_text(json.dumps(result, indent=1, default=float))
             console.print(f"wrote {out}")
 
+    @bench_app.command("deployed")
+    def bench_deployed(
+        run: Path = typer.Option(Path("results"), "--run", help="Run folder (persival run --out) of the FE arm."),
+        states: int = typer.Option(200, "--states", min=1, help="Random activation vectors solved by the exact FE path."),
+        seed: int = typer.Option(11, "--seed", help="Seed of the random activations (another than the run's held-out)."),
+    ) -> None:
+        """Every surrogate of a run against N more exact FE states (a resumable store under RUN/bench/)."""
+        import json
+
+        from persival.evaluate.bench_deployed import print_deployed_benchmark, run_deployed_benchmark
+
+        with user_errors():
+            result = run_deployed_benchmark(run, states, seed)
+        markdown = print_deployed_benchmark(result)
+        folder = Path(run) / "bench"
+        (folder / "deployed.json").write_text(json.dumps(result, indent=1, default=float))
+        (folder / "deployed.md").write_text(markdown)
+        typer.echo(f"wrote {folder / 'deployed.json'} and {folder / 'deployed.md'}")
+
     @bench_app.command("sg")
     def bench_sg(
         dim: int = typer.Option(5, min=1, help="Input dimension (activations)."),
