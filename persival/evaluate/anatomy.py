@@ -177,7 +177,8 @@ def print_tables(console, results: list[dict], per_state_columns: int = 5) -> No
                     f"{entry['deepest_state']} ({entry['deepest_angle_deg']:.0f} deg)"]
         table.add_row(*row)
     console.print(table)
-    gaps = Table(title="largest gap between a muscle's belly and its bed (mm)")
+    gaps = Table(title="largest gap between a muscle's belly and its bed (mm; at: position between origin 0 and "
+                       "insertion 1)")
     gaps.add_column("muscle")
     gaps.add_column("bed")
     if few:
@@ -191,7 +192,8 @@ def print_tables(console, results: list[dict], per_state_columns: int = 5) -> No
         if few:
             for state in results:
                 hit = next(r for r in state["bed_gaps"] if r["muscle"] == entry["muscle"])
-                row.append(f"{hit['largest_gap_mm']:.1f} at {hit['at_fraction']:.2f}")
+                gap = hit["largest_gap_mm"]
+                row.append(f"{gap:.1f} at {hit['at_fraction']:.2f}" if gap > 0 else "0 (on its bed)")
         else:
             row += [f"{entry['largest_gap_mm']:.1f}", f"{entry['state']} ({entry['elbow_angle_deg']:.0f} deg)"]
         gaps.add_row(*row)
