@@ -134,3 +134,27 @@ def test_the_coarse_hanging_arm_inside_test_agrees_with_the_winding_number(tmp_p
     written = json.loads(out.read_text())
     assert written["states"][0]["overlaps"] == json.loads(json.dumps(result["overlaps"]))
     assert "surface nodes of a body inside another" in run.output
+
+
+def test_outlines_are_the_muscles_cross_sections_and_overlaps_are_refused_by_name():
+    """The model file's outlines across the humerus (before meshing): where a centre line runs
+    nearly along the humerus its outline is a circle of the station's radius about it; the
+    default's overlapping outlines are refused in one message naming the muscles and the level."""
+    from persival.model.arm_body import ArmKinematics, muscle_profile
+    from persival.model.cross_sections import OutlineOverlapError, check_outlines, outlines_at
+
+    arm = ArmKinematics()
+    z = 150.0
+    triceps = arm.spec.muscle("triceps")
+    line = arm.centre_line(triceps)
+    radius, _ = muscle_profile(triceps, np.linspace(0.0, 1.0, len(line)), arm.centre_line_length(triceps))
+    ring = outlines_at(arm, z)["triceps"]
+    assert len(ring) == 1 and np.allclose(ring[0][:, 2], z)
+    i = np.flatnonzero((line[:-1, 2] - z) * (line[1:, 2] - z) <= 0)[0]
+    t = (z - line[i, 2]) / (line[i + 1, 2] - line[i, 2])
+    centre, r = line[i] + t * (line[i + 1] - line[i]), radius[i] + t * (radius[i + 1] - radius[i])
+    distance = np.linalg.norm(ring[0][:, :2] - centre[:2], axis=1)
+    tilt = np.linalg.norm(line[i + 1] - line[i]) / abs(line[i + 1, 2] - line[i, 2])  # 1 / cos of the tilt
+    assert distance.min() == pytest.approx(r, rel=1e-6) and distance.max() == pytest.approx(r * tilt, rel=1e-3)
+    with pytest.raises(OutlineOverlapError, match=r"brachialis in biceps at 30 % of the humerus \(z = 81.7 mm"):
+        check_outlines(arm)

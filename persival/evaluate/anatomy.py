@@ -22,7 +22,8 @@ from persival.model.mesh import Tet10Mesh
 from persival.model.output import bone_surfaces
 from persival.vocabulary import MUSCLES
 
-__all__ = ["check_state_dirs", "check_store", "print_tables", "MUSCLE_BONE_LIMIT_MM", "MUSCLE_MUSCLE_LIMIT_MM"]
+__all__ = ["check_outlines_table", "check_state_dirs", "check_store", "print_tables", "MUSCLE_BONE_LIMIT_MM",
+           "MUSCLE_MUSCLE_LIMIT_MM"]
 
 # SPEC 3.3: in any state, penetration muscle-bone <= 1 mm and muscle-muscle <= 2 mm
 MUSCLE_BONE_LIMIT_MM = 1.0
@@ -198,3 +199,27 @@ def print_tables(console, results: list[dict], per_state_columns: int = 5) -> No
             row += [f"{entry['largest_gap_mm']:.1f}", f"{entry['state']} ({entry['elbow_angle_deg']:.0f} deg)"]
         gaps.add_row(*row)
     console.print(gaps)
+
+
+def check_outlines_table(console, model_file=None, out: Path | None = None) -> list[dict]:
+    """The model file's muscle outlines across the humerus (persival.model.cross_sections): a table
+    of the overlaps per level, and the JSON file."""
+    from rich.table import Table
+
+    from persival.model.cross_sections import LEVELS, outline_overlaps
+
+    kinematics = ArmKinematics(model_file)
+    rows = outline_overlaps(kinematics)
+    table = Table(title=f"{kinematics.spec.name}: outlines across the humerus overlapping each other or the bone "
+                        f"({len(rows)} at {len(LEVELS)} levels; muscles in their mesh poses)")
+    for column in ("level", "z (mm)", "outline", "inside", "vertices", "deepest (mm)"):
+        table.add_column(column, justify="right" if column in ("z (mm)", "vertices", "deepest (mm)") else "left")
+    for r in rows:
+        table.add_row(f"{100 * r['level']:.0f} %", f"{r['z_mm']:g}", r["outline"], r["inside"], f"{r['vertices']}/{r['of']}",
+                      f"{r['deepest_mm']:.1f}")
+    console.print(table if rows else "no outlines overlap at any level")
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps({"model": kinematics.spec.name, "levels": list(LEVELS), "overlaps": rows}, indent=1))
+        console.print(f"wrote {out}")
+    return rows

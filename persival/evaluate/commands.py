@@ -227,6 +227,8 @@ def _register_anatomy(app: typer.Typer) -> None:
                                           "(default: a store's own, else the built-in arm)."),
         attachment: float = typer.Option(10.0, "--attachment-mm", min=0.0, help="Leave out nodes this close to a "
                                          "muscle's ends (its attachments)."),
+        outlines: bool = typer.Option(False, "--outlines", help="Instead: the model file's muscle outlines across the "
+                                      "humerus at 10/30/50/70/90 %, checked as polygons (no states needed)."),
         out: Path | None = typer.Option(None, "--out", help="JSON file to write (every state, and the worst per pair)."),
     ) -> None:
         """Overlap between bodies (surface nodes inside another body, deepest penetration) and each muscle's gap to its bed."""
@@ -234,14 +236,17 @@ def _register_anatomy(app: typer.Typer) -> None:
         from rich.progress import Progress
 
         from persival.campaign.store import StoreError
-        from persival.evaluate.anatomy import check_state_dirs, check_store, print_tables, write_json
+        from persival.evaluate.anatomy import check_outlines_table, check_state_dirs, check_store, print_tables, write_json
 
         console = Console()
         with user_errors(StoreError, out=out):
             if out is not None:
                 check_output_file(out)
-            if bool(states) == (store is not None):
-                raise ValueError("give state directories or --store STORE (one of the two)")
+            if bool(states) + (store is not None) + outlines != 1:
+                raise ValueError("give state directories, --store STORE or --outlines (one of the three)")
+            if outlines:
+                check_outlines_table(console, model, out)
+                return
             if store is not None:
                 with Progress(console=console, transient=True) as bar:
                     task = bar.add_task("anatomy of the store's states", total=None)

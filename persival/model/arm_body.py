@@ -100,18 +100,6 @@ class ArmKinematics:
         return origin + self.muscle_length(muscle, theta_deg)[0] * cylinder.first_direction(origin, insertion)
 
 
-class ArmBody(ArmKinematics):
-    """The meshed arm of a model file and mesh profile: geometry, kinematics, external loads."""
-
-    def __init__(self, model_file: str | Path | None = None, profile: str = "quick"):
-        super().__init__(model_file)
-        self.profile = profile
-        self.spec.profile(profile)  # unknown profile -> clear error
-        self.mesh, self.muscle_cells, self.muscle_nodes = self._mesh()
-        self.material = self._material()
-
-    # -- geometry -----------------------------------------------------------------------------
-
     def centre_line(self, muscle: Muscle, stations: int = 33) -> np.ndarray:
         """Stations along origin -> via points -> insertion in the muscle's mesh pose."""
         knots = np.array([muscle.origin, *muscle.via, self.body_end(muscle, muscle.mesh_angle_deg)])
@@ -135,6 +123,19 @@ class ArmBody(ArmKinematics):
     def centre_line_length(self, muscle: Muscle) -> float:
         """Length (mm) of the muscle's centre line in its mesh pose: the scale of its tissue layout."""
         return float(np.linalg.norm(np.diff(self.centre_line(muscle), axis=0), axis=1).sum())
+
+
+class ArmBody(ArmKinematics):
+    """The meshed arm of a model file and mesh profile: geometry, kinematics, external loads."""
+
+    def __init__(self, model_file: str | Path | None = None, profile: str = "quick"):
+        super().__init__(model_file)
+        self.profile = profile
+        self.spec.profile(profile)  # unknown profile -> clear error
+        self.mesh, self.muscle_cells, self.muscle_nodes = self._mesh()
+        self.material = self._material()
+
+    # -- geometry -----------------------------------------------------------------------------
 
     def _mesh(self):
         """The arm's mesh (from the on-disk cache when this model and profile were meshed before)
