@@ -15,7 +15,7 @@ __all__ = ["skeleton_for"]
 
 
 def _bone(name: str, segment: str, start, end, radius: float) -> dict:
-    from persival.model.output import tube_surface
+    from persival.model.bone_shapes import tube_surface
 
     points, triangles = tube_surface(np.asarray(start, float), np.asarray(end, float), radius)
     return {"name": name, "segment": segment, "points": np.round(points, 3).tolist(), "triangles": triangles.tolist()}

@@ -151,6 +151,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         console.print(f"wrote {out / 'accuracy.json'} and {plot_accuracy(report, out / 'accuracy.png')}")
 
     _register_run_evaluation(app, bench_app)
+    _register_anatomy(app)
 
     @bench_app.command("fe")
     def bench_fe(
@@ -234,6 +235,50 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         with user_errors():
             result = run_benchmark(dim=dim, level=level, degree=degree, n_out=n_out, batch=batch, reps_single=reps)
         print_benchmark(result)
+
+
+def _register_anatomy(app: typer.Typer) -> None:
+    @app.command()
+    def anatomy(
+        states: list[Path] = typer.Argument(None, help="State directories written by the FE stage or `persival simulate`."),
+        store: Path | None = typer.Option(None, "--store", help="Campaign store of the FE arm (instead of state directories)."),
+        model: Path | None = typer.Option(None, "--model", help="Model file the states were computed with "
+                                          "(default: a store's own, else the built-in arm)."),
+        attachment: float = typer.Option(10.0, "--attachment-mm", min=0.0, help="Leave out nodes this close to a "
+                                         "muscle's ends (its attachments)."),
+        outlines: bool = typer.Option(False, "--outlines", help="Instead: the model file's muscle outlines across the "
+                                      "humerus at 10/30/50/70/90 %, checked as polygons (no states needed)."),
+        out: Path | None = typer.Option(None, "--out", help="JSON file to write (every state, and the worst per pair)."),
+    ) -> None:
+        """Overlap between bodies (surface nodes inside another body, deepest penetration) and each muscle's gap to its bed."""
+        from rich.console import Console
+        from rich.progress import Progress
+
+        from persival.campaign.store import StoreError
+        from persival.evaluate.anatomy import check_outlines_table, check_state_dirs, check_store, print_tables, write_json
+
+        console = Console()
+        with user_errors(StoreError, out=out):
+            if out is not None:
+                check_output_file(out)
+            if bool(states) + (store is not None) + outlines != 1:
+                raise ValueError("give state directories, --store STORE or --outlines (one of the three)")
+            if outlines:
+                check_outlines_table(console, model, out)
+                return
+            if store is not None:
+                with Progress(console=console, transient=True) as bar:
+                    task = bar.add_task("anatomy of the store's states", total=None)
+                    results = check_store(store, model, attachment,
+                                          progress=lambda done, total: bar.update(task, completed=done, total=total))
+            else:
+                results = check_state_dirs(states, model, attachment)
+            if not results:
+                raise ValueError(f"{store}: no finished states to measure")
+            print_tables(console, results)
+            if out is not None:
+                write_json(results, out, str(store) if store is not None else ", ".join(map(str, states)), attachment)
+                console.print(f"wrote {out}")
 
 
 def _register_run_evaluation(app: typer.Typer, bench_app: typer.Typer) -> None:

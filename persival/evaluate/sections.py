@@ -2,9 +2,9 @@
 
 A side view cannot tell a belly lying on a bone from one passing through it; a section across
 the upper arm can. Each state directory (``persival simulate``) becomes a panel with the
-outlines of the chosen muscles' surfaces and of the bones cut by the planes z = const
-(upper-arm frame: humerus along +z, anterior +y, hinge axis +x), one colour per height and
-one line style per muscle.
+outlines of the chosen muscles' surfaces and of the bones (their shapes: the humerus widens to
+its epicondyles) cut by the planes z = const (upper-arm frame: humerus along +z, anterior +y,
+hinge axis +x), one colour per height (bones thick and pale) and one line style per muscle.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.evaluate.render import BONE_COLOUR, headless_vtk, read_state_dir
+from persival.evaluate.render import headless_vtk, read_state_dir
 from persival.vocabulary import check_muscle_names
 
 __all__ = ["render_sections"]
@@ -59,7 +59,8 @@ def render_sections(directories: list[str | Path], heights_mm: list[float], out:
             colour = f"C{k}"
             for bone in bones:
                 segments = _outline(bone.extract_surface(algorithm="dataset_surface"), z)
-                ax.add_collection(LineCollection(segments, colors=BONE_COLOUR, linewidths=3.0))
+                # in the height's colour: a bone's outline changes with the height (the humerus's flare)
+                ax.add_collection(LineCollection(segments, colors=colour, linewidths=3.5, alpha=0.3))
             for surface, style in zip(surfaces, STYLES):
                 ax.add_collection(LineCollection(_outline(surface, z), colors=colour, linewidths=1.2, linestyles=style))
         ax.autoscale()
@@ -71,7 +72,7 @@ def render_sections(directories: list[str | Path], heights_mm: list[float], out:
         keys = [Line2D([], [], color=f"C{k}", label=f"z = {z:g} mm") for k, z in enumerate(heights_mm)]
         if len(chosen) > 1:
             keys += [Line2D([], [], color="0.2", linestyle=style, label=name) for name, style in zip(chosen, STYLES)]
-        keys.append(Line2D([], [], color=BONE_COLOUR, linewidth=3.0, label="bones"))
+        keys.append(Line2D([], [], color="0.2", linewidth=3.5, alpha=0.3, label="bones"))
         ax.legend(handles=keys, fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     fig.suptitle(f"sections across the upper arm ({', '.join(chosen)})", fontsize=9)
     out = Path(out)

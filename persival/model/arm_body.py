@@ -21,7 +21,7 @@ from persival.model.rotations import rotation_about
 from persival.model.state_cache import cached_mesh
 from persival.model.wrapping import WrapCylinder
 
-__all__ = ["ArmBody", "muscle_profile", "rotation_about"]
+__all__ = ["ArmBody", "ArmKinematics", "muscle_profile", "rotation_about"]
 
 
 def muscle_profile(muscle: Muscle, s: np.ndarray, length: float) -> tuple[np.ndarray, np.ndarray]:
@@ -50,23 +50,55 @@ def muscle_profile(muscle: Muscle, s: np.ndarray, length: float) -> tuple[np.nda
     return radius, gamma
 
 
-class ArmBody:
-    """The meshed arm of a model file and mesh profile: geometry, kinematics, external loads."""
+class ArmKinematics:
+    """The joint's kinematics of a model file, without a mesh: where forearm points and the
+    muscles' ends are at an elbow angle (enough to place bones and attachments)."""
 
-    def __init__(self, model_file: str | Path | None = None, profile: str = "quick"):
+    def __init__(self, model_file: str | Path | None = None):
         self.spec, self.model_hash = load_model_file(model_file)
-        self.profile = profile
-        self.spec.profile(profile)  # unknown profile -> clear error
         joint = self.spec.joint
         self.axis = np.asarray(joint.axis, dtype=float) / np.linalg.norm(joint.axis)
         self.centre = np.asarray(joint.centre, dtype=float)
-        self.mesh, self.muscle_cells, self.muscle_nodes = self._mesh()
-        self.material = self._material()
 
-    # -- geometry -----------------------------------------------------------------------------
     def forearm_point(self, p: np.ndarray, theta_deg: float) -> np.ndarray:
         """A forearm-frame point (given at theta = 0) at elbow angle theta."""
         return self.centre + (np.asarray(p, dtype=float) - self.centre) @ rotation_about(self.axis, theta_deg).T
+
+    def wrap_cylinder(self, muscle: Muscle) -> WrapCylinder:
+        """The cylinder on the hinge axis the muscle's path wraps (radius 0: a straight path)."""
+        return WrapCylinder(self.centre, self.axis, muscle.wrap_radius, 1 if muscle.action == "extensor" else -1)
+
+    def muscle_length(self, muscle: Muscle, theta_deg: float) -> tuple[float, float, float]:
+        """The muscle's length L (mm) and its derivatives dL/dtheta, d2L/dtheta2 (per radian).
+
+        L is the origin-insertion path's length less the wrapped path's cable (``wrap_cable``):
+        the length of the FE body between its end faces. The insertion turns about the hinge:
+        I' = k x (I - c), I'' = k x I'. A wrapped path (SPEC 3.3, :mod:`persival.model.wrapping`)
+        gains r per radian while it wraps.
+        """
+        insertion = self.forearm_point(muscle.insertion, theta_deg)
+        v1 = np.cross(self.axis, insertion - self.centre)
+        v2 = np.cross(self.axis, v1)
+        L, dL, d2L = self.wrap_cylinder(muscle).geometry(np.asarray(muscle.origin, dtype=float), insertion, v1, v2)
+        if L <= muscle.wrap_cable:
+            raise ValueError(f"muscle {muscle.name!r}: wrap_cable {muscle.wrap_cable} mm is longer than its path "
+                             f"({L:.1f} mm at {theta_deg} deg)")
+        return L - muscle.wrap_cable, dL, d2L
+
+    def body_end(self, muscle: Muscle, theta_deg: float) -> np.ndarray:
+        """Where the muscle's FE body ends at theta: its insertion, or for a wrapped path the point
+        ``L(theta) - wrap_cable`` along the path's first segment (the rest is cable)."""
+        insertion = self.forearm_point(muscle.insertion, theta_deg)
+        if muscle.wrap_radius == 0:
+            return insertion
+        origin = np.asarray(muscle.origin, dtype=float)
+        cylinder = self.wrap_cylinder(muscle)
+        if muscle.wrap_cable == 0 and not cylinder.wraps(origin, insertion):
+            # exactly the insertion, not O + L d rounded: gmsh's loft meshes a centre line that
+            # differs in the 14th digit differently (measured: 2548 against 1754 nodes)
+            return insertion
+        return origin + self.muscle_length(muscle, theta_deg)[0] * cylinder.first_direction(origin, insertion)
+
 
     def centre_line(self, muscle: Muscle, stations: int = 33) -> np.ndarray:
         """Stations along origin -> via points -> insertion in the muscle's mesh pose."""
@@ -91,6 +123,19 @@ class ArmBody:
     def centre_line_length(self, muscle: Muscle) -> float:
         """Length (mm) of the muscle's centre line in its mesh pose: the scale of its tissue layout."""
         return float(np.linalg.norm(np.diff(self.centre_line(muscle), axis=0), axis=1).sum())
+
+
+class ArmBody(ArmKinematics):
+    """The meshed arm of a model file and mesh profile: geometry, kinematics, external loads."""
+
+    def __init__(self, model_file: str | Path | None = None, profile: str = "quick"):
+        super().__init__(model_file)
+        self.profile = profile
+        self.spec.profile(profile)  # unknown profile -> clear error
+        self.mesh, self.muscle_cells, self.muscle_nodes = self._mesh()
+        self.material = self._material()
+
+    # -- geometry -----------------------------------------------------------------------------
 
     def _mesh(self):
         """The arm's mesh (from the on-disk cache when this model and profile were meshed before)
@@ -165,41 +210,6 @@ class ArmBody:
         dM = -fa.mass * fa.gravity * fa.centre_of_mass * np.cos(theta_rad)
         dM += j.limit_moment * (-np.exp((lo - theta) / w) - np.exp((theta - hi) / w)) / w * (180.0 / np.pi)
         return float(M), float(dM)
-
-    def wrap_cylinder(self, muscle: Muscle) -> WrapCylinder:
-        """The cylinder on the hinge axis the muscle's path wraps (radius 0: a straight path)."""
-        return WrapCylinder(self.centre, self.axis, muscle.wrap_radius, 1 if muscle.action == "extensor" else -1)
-
-    def muscle_length(self, muscle: Muscle, theta_deg: float) -> tuple[float, float, float]:
-        """The muscle's length L (mm) and its derivatives dL/dtheta, d2L/dtheta2 (per radian).
-
-        L is the origin-insertion path's length less the wrapped path's cable (``wrap_cable``):
-        the length of the FE body between its end faces. The insertion turns about the hinge:
-        I' = k x (I - c), I'' = k x I'. A wrapped path (docs/theory.md, 3.4, :mod:`persival.model.wrapping`)
-        gains r per radian while it wraps.
-        """
-        insertion = self.forearm_point(muscle.insertion, theta_deg)
-        v1 = np.cross(self.axis, insertion - self.centre)
-        v2 = np.cross(self.axis, v1)
-        L, dL, d2L = self.wrap_cylinder(muscle).geometry(np.asarray(muscle.origin, dtype=float), insertion, v1, v2)
-        if L <= muscle.wrap_cable:
-            raise ValueError(f"muscle {muscle.name!r}: wrap_cable {muscle.wrap_cable} mm is longer than its path "
-                             f"({L:.1f} mm at {theta_deg} deg)")
-        return L - muscle.wrap_cable, dL, d2L
-
-    def body_end(self, muscle: Muscle, theta_deg: float) -> np.ndarray:
-        """Where the muscle's FE body ends at theta: its insertion, or for a wrapped path the point
-        ``L(theta) - wrap_cable`` along the path's first segment (the rest is cable)."""
-        insertion = self.forearm_point(muscle.insertion, theta_deg)
-        if muscle.wrap_radius == 0:
-            return insertion
-        origin = np.asarray(muscle.origin, dtype=float)
-        cylinder = self.wrap_cylinder(muscle)
-        if muscle.wrap_cable == 0 and not cylinder.wraps(origin, insertion):
-            # exactly the insertion, not O + L d rounded: gmsh's loft meshes a centre line that
-            # differs in the 14th digit differently (measured: 2548 against 1754 nodes)
-            return insertion
-        return origin + self.muscle_length(muscle, theta_deg)[0] * cylinder.first_direction(origin, insertion)
 
     def cell_activation(self, activations: np.ndarray) -> np.ndarray:
         return np.asarray(activations, dtype=float)[self.mesh.cell_data["muscle"]]

@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 import tomllib
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
@@ -63,12 +63,59 @@ class Forearm(_Strict):
     hand_distance: float = Field(330.0, gt=0, description="mm from the elbow to a load held in the hand (motion model)")
 
 
+class HumerusShape(_Strict):
+    """The humerus drawn and checked (persival.model.bone_shapes; sources in docs/arm_model.md)."""
+
+    kind: Literal["humerus"] = "humerus"
+    length: float = Field(315.0, gt=0, description="mm, trochlea to the top of the head")
+    epicondylar_width: float = Field(60.0, gt=0, description="mm, medial to lateral epicondyle")
+    trochlea_width: float = Field(22.0, gt=0, description="mm along the hinge axis")
+    trochlea_radius: float = Field(9.5, gt=0, description="mm, at the trochlear groove")
+    capitulum_radius: float = Field(11.5, gt=0, description="mm, centred on the hinge axis")
+    head_diameter: float = Field(44.0, gt=0, description="mm, humeral head")
+    fossae_deg: tuple[float, float] = Field((0.0, 150.0), description="elbow angles whose forearm bones the fossae "
+                                                                     "take in (a bony stop beyond)")
+
+
+class UlnaShape(_Strict):
+    kind: Literal["ulna"] = "ulna"
+    joint_clearance: float = Field(1.0, gt=0, description="mm of cartilage between the notch and the trochlea")
+    olecranon_angle_deg: float = Field(150.0, gt=0, lt=180, description="the olecranon's tip, from the forearm's "
+                                                                          "distal direction towards posterior")
+    coronoid_angle_deg: float = Field(10.0, ge=0, lt=90, description="the coronoid's tip, towards anterior")
+
+
+class RadiusShape(_Strict):
+    kind: Literal["radius"] = "radius"
+    head_diameter: float = Field(22.5, gt=0, description="mm")
+    head_height: float = Field(10.6, gt=0, description="mm along the radius")
+    neck_length: float = Field(13.0, gt=0, description="mm, head to the tuberosity")
+
+
+class TubeShape(_Strict):
+    """A capped cylinder along start-end with the bone's radius (a bone without an anatomical shape)."""
+
+    kind: Literal["tube"] = "tube"
+
+
+BoneShape = Annotated[HumerusShape | UlnaShape | RadiusShape | TubeShape, Field(discriminator="kind")]
+
+
 class Bone(_Strict):
     name: str
     segment: Literal["upper_arm", "forearm"]
     start: Vector
     end: Vector
     radius: float = Field(gt=0)
+    # drawing and anatomy checks only: contact sees the capsule start-end-radius. Default: the
+    # anatomical shape of a bone named humerus, ulna or radius, else a tube.
+    shape: BoneShape | None = None
+
+    def drawn_shape(self):
+        """The shape this bone is drawn with (its own, or the default for its name)."""
+        if self.shape is not None:
+            return self.shape
+        return {"humerus": HumerusShape, "ulna": UlnaShape, "radius": RadiusShape}.get(self.name, TubeShape)()
 
 
 class Contact(_Strict):

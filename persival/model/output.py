@@ -1,5 +1,7 @@
 """Writing solved arm states: state.json plus VTU files of every muscle and bone (ParaView).
 
+The bones are written with their shapes (persival.model.bone_shapes); contact sees capsules.
+
 A state directory is written into a temporary sibling and renamed into place, so a failed
 or interrupted write leaves nothing half-done.
 """
@@ -15,38 +17,19 @@ from pathlib import Path
 import numpy as np
 
 from persival.model.arm import ArmModel, ArmState
+from persival.model.bone_shapes import bone_shapes
 from persival.vocabulary import MUSCLES
 
 
-def tube_surface(start: np.ndarray, end: np.ndarray, radius: float, segments: int = 24) -> tuple[np.ndarray, np.ndarray]:
-    """A capped cylinder as triangles: the display shape of a rigid bone."""
-    start, end = np.asarray(start, float), np.asarray(end, float)
-    axis = end - start
-    length = np.linalg.norm(axis)
-    axis /= length
-    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(axis, helper)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(axis, e1)
-    phi = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
-    ring = radius * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2)
-    points = np.vstack([start + ring, end + ring, start, end])
-    i = np.arange(segments)
-    j = (i + 1) % segments
-    sides = np.vstack([np.column_stack([i, j, segments + i]), np.column_stack([j, segments + j, segments + i])])
-    caps = np.vstack([np.column_stack([np.full(segments, 2 * segments), j, i]),
-                      np.column_stack([np.full(segments, 2 * segments + 1), segments + i, segments + j])])
-    return points, np.vstack([sides, caps])
-
-
-def bone_surfaces(arm: ArmModel, theta_deg: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Triangulated bones at elbow angle theta (forearm bones rotated about the hinge)."""
+def bone_surfaces(arm, theta_deg: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Triangulated bones with their shapes (persival.model.bone_shapes) at elbow angle theta:
+    forearm bones turned about the hinge. ``arm``: anything with the model's ``spec`` and
+    ``forearm_point`` (an ArmModel, or ArmKinematics without a mesh)."""
     out = {}
-    for bone in arm.spec.bones:
-        points, triangles = tube_surface(np.array(bone.start), np.array(bone.end), bone.radius)
-        if bone.segment == "forearm":
+    for name, (points, triangles) in bone_shapes(arm.spec).items():
+        if arm.spec.bone(name).segment == "forearm":
             points = arm.forearm_point(points, theta_deg)
-        out[bone.name] = (points, triangles)
+        out[name] = (points, triangles)
     return out
 
 

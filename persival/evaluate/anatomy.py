@@ -1,0 +1,225 @@
+"""`persival anatomy`: overlap between bodies and bed gaps of solved arm states (SPEC 3.3, anatomy).
+
+Reads the FE stage's state directories (one VTU per muscle and bone at its deformed position)
+or a campaign store of the FE arm (muscle surfaces per state; the bones are placed from the
+model file at each state's elbow angle), turns every body into a closed triangle surface and
+measures it with :mod:`persival.model.anatomy_check`. The muscles' ends (origin and the end of
+the FE body at the state's angle) come from the model file, which must be the one the states
+were computed with.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from persival.campaign.arm_simulator import display_triangles
+from persival.model.anatomy_check import Body, bed_gaps, overlaps
+from persival.model.arm_body import ArmKinematics
+from persival.model.mesh import Tet10Mesh
+from persival.model.output import bone_surfaces
+from persival.vocabulary import MUSCLES
+
+__all__ = ["check_outlines_table", "check_state_dirs", "check_store", "print_tables", "MUSCLE_BONE_LIMIT_MM",
+           "MUSCLE_MUSCLE_LIMIT_MM"]
+
+# SPEC 3.3: in any state, penetration muscle-bone <= 1 mm and muscle-muscle <= 2 mm
+MUSCLE_BONE_LIMIT_MM = 1.0
+MUSCLE_MUSCLE_LIMIT_MM = 2.0
+
+
+def _muscle_ends(kinematics: ArmKinematics, theta_deg: float) -> dict[str, np.ndarray]:
+    out = {}
+    for muscle in kinematics.spec.ordered_muscles():
+        out[muscle.name] = np.array([muscle.origin, kinematics.body_end(muscle, theta_deg)], dtype=float)
+    return out
+
+
+def _tet10_surface(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Surface nodes (mid-side included) and their linear triangles, numbered locally."""
+    faces = Tet10Mesh(points, cells).boundary_faces()
+    nodes = np.unique(faces)
+    local = np.full(len(points), -1, dtype=np.int64)
+    local[nodes] = np.arange(len(nodes))
+    return points[nodes], display_triangles(local[faces])
+
+
+def _check_model(found: str | None, kinematics: ArmKinematics, what: str) -> None:
+    if found is not None and found != kinematics.model_hash:
+        raise ValueError(f"{what} was computed from another model file (model hash {found[:12]}, the model given has "
+                         f"{kinematics.model_hash[:12]}); pass its model file with --model")
+
+
+def _measure(label: str, theta: float, activations, bodies: list[Body], attachment_mm: float) -> dict:
+    return {"state": label, "elbow_angle_deg": float(theta),
+            "activations": dict(zip(MUSCLES, map(float, activations))),
+            "overlaps": overlaps(bodies, attachment_mm), "bed_gaps": bed_gaps(bodies)}
+
+
+def check_state_dirs(directories, model_file=None, attachment_mm: float = 10.0) -> list[dict]:
+    """Measure state directories written by the FE stage or ``persival simulate``."""
+    import meshio
+
+    from persival.evaluate.render import read_state_dir
+
+    kinematics = ArmKinematics(model_file)
+    results = []
+    for directory in map(Path, directories):
+        summary = read_state_dir(directory)
+        _check_model(summary.get("model_hash"), kinematics, str(directory))
+        theta = float(summary["elbow_angle_deg"])
+        ends = _muscle_ends(kinematics, theta)
+        bodies = []
+        for name in MUSCLES:
+            mesh = meshio.read(directory / f"{name}.vtu")
+            points, triangles = _tet10_surface(np.asarray(mesh.points, dtype=float), mesh.cells_dict["tetra10"])
+            bodies.append(Body(name, points, triangles, ends[name]))
+        for path in sorted(directory.glob("bone_*.vtu")):
+            mesh = meshio.read(path)
+            bodies.append(Body(path.stem.removeprefix("bone_"), np.asarray(mesh.points, dtype=float),
+                               mesh.cells_dict["triangle"]))
+        results.append(_measure(directory.name, theta, summary["activations"].values(), bodies, attachment_mm))
+    return results
+
+
+def check_store(path, model_file=None, attachment_mm: float = 10.0, progress=None) -> list[dict]:
+    """Measure every finished state of a campaign store of the FE arm."""
+    from persival.campaign.store import CampaignStore
+
+    with CampaignStore.open(path) as store:
+        spec = store.spec
+        if spec.kind != "arm":
+            raise ValueError(f"{path}: a store of the {spec.kind!r} simulator; anatomy needs FE arm states (simulator arm)")
+        kinematics = ArmKinematics(model_file if model_file is not None else spec.options.get("model_file"))
+        _check_model(store.provenance.get("model_hash"), kinematics, str(path))
+        reference = store.reference
+        angles = store.elbow_angles()
+        done = np.flatnonzero(np.isfinite(angles))
+        positions = {name: store.surface_positions(name, done) for name in MUSCLES}
+        activations, ids = store.activations, store.ids
+    results = []
+    for row, index in enumerate(done):
+        theta = float(angles[index])
+        ends = _muscle_ends(kinematics, theta)
+        bodies = [Body(name, positions[name][row], reference.surfaces[name].triangles, ends[name]) for name in MUSCLES]
+        bodies += [Body(name, p, t) for name, (p, t) in bone_surfaces(kinematics, theta).items()]
+        results.append(_measure(f"{Path(path).stem}/{int(ids[index])}", theta, activations[index], bodies, attachment_mm))
+        if progress is not None:
+            progress(row + 1, len(done))
+    return results
+
+
+def _limit(a: str, b: str) -> float | None:
+    muscles = (a in MUSCLES) + (b in MUSCLES)
+    return {2: MUSCLE_MUSCLE_LIMIT_MM, 1: MUSCLE_BONE_LIMIT_MM}.get(muscles)
+
+
+def worst_cases(results: list[dict]) -> dict:
+    """Per pair and per muscle: the worst state (deepest overlap, largest gap) over all states."""
+    pairs, gaps = {}, {}
+    for state in results:
+        for row in state["overlaps"]:
+            key = (row["body"], row["inside"])
+            entry = pairs.setdefault(key, {"body": key[0], "inside": key[1], "limit_mm": _limit(*key), "states": 0,
+                                           "most_nodes": 0, "of": row["of"], "deepest_mm": 0.0})
+            entry["states"] += 1
+            entry["most_nodes"] = max(entry["most_nodes"], row["nodes"])
+            if row["deepest_mm"] > entry["deepest_mm"]:
+                entry.update(deepest_mm=row["deepest_mm"], deepest_state=state["state"],
+                             deepest_angle_deg=state["elbow_angle_deg"])
+        for row in state["bed_gaps"]:
+            entry = gaps.setdefault(row["muscle"], {"muscle": row["muscle"], "bed": row["bed"], "largest_gap_mm": -1.0})
+            if row["largest_gap_mm"] > entry["largest_gap_mm"]:
+                entry.update(largest_gap_mm=row["largest_gap_mm"], state=state["state"],
+                             elbow_angle_deg=state["elbow_angle_deg"], at_fraction=row["at_fraction"])
+    ordered = sorted(pairs.values(), key=lambda e: -e["deepest_mm"])
+    return {"states": len(results), "overlaps": ordered, "bed_gaps": [gaps[m] for m in MUSCLES if m in gaps]}
+
+
+def write_json(results: list[dict], out: Path, source: str, attachment_mm: float) -> None:
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"source": source, "attachment_mm": attachment_mm, "worst": worst_cases(results),
+                               "states": results}, indent=1))
+
+
+def _cell(depth: float, limit: float | None, text: str) -> str:
+    return f"[red]{text}[/red]" if limit is not None and depth > limit else text
+
+
+def print_tables(console, results: list[dict], per_state_columns: int = 5) -> None:
+    """The overlap and bed-gap tables: one column per state when there are few, else the worst state."""
+    from rich.table import Table
+
+    worst = worst_cases(results)
+    few = len(results) <= per_state_columns
+    table = Table(title=f"surface nodes of a body inside another ({len(results)} states; nodes within the attachment "
+                        "distance of a muscle's ends left out; red: beyond the limit)")
+    for column in ("body", "inside", "limit (mm)"):
+        table.add_column(column)
+    if few:
+        for state in results:
+            table.add_column(f"{state['state']}\n{state['elbow_angle_deg']:.0f} deg\nnodes, deepest", justify="right")
+    else:
+        for column in ("states", "most nodes", "deepest (mm)", "in state"):
+            table.add_column(column, justify="right")
+    for entry in worst["overlaps"]:
+        a, b, limit = entry["body"], entry["inside"], entry["limit_mm"]
+        row = [a, b, "-" if limit is None else f"{limit:g}"]
+        if few:
+            for state in results:
+                hit = next((r for r in state["overlaps"] if (r["body"], r["inside"]) == (a, b)), None)
+                row.append("" if hit is None else
+                           _cell(hit["deepest_mm"], limit, f"{hit['nodes']}/{hit['of']}, {hit['deepest_mm']:.1f}"))
+        else:
+            row += [str(entry["states"]), f"{entry['most_nodes']}/{entry['of']}",
+                    _cell(entry["deepest_mm"], limit, f"{entry['deepest_mm']:.1f}"),
+                    f"{entry['deepest_state']} ({entry['deepest_angle_deg']:.0f} deg)"]
+        table.add_row(*row)
+    console.print(table)
+    gaps = Table(title="largest gap between a muscle's belly and its bed (mm; at: position between origin 0 and "
+                       "insertion 1)")
+    gaps.add_column("muscle")
+    gaps.add_column("bed")
+    if few:
+        for state in results:
+            gaps.add_column(f"{state['state']}\n{state['elbow_angle_deg']:.0f} deg", justify="right")
+    else:
+        gaps.add_column("largest gap", justify="right")
+        gaps.add_column("in state", justify="right")
+    for entry in worst["bed_gaps"]:
+        row = [entry["muscle"], ", ".join(entry["bed"])]
+        if few:
+            for state in results:
+                hit = next(r for r in state["bed_gaps"] if r["muscle"] == entry["muscle"])
+                gap = hit["largest_gap_mm"]
+                row.append(f"{gap:.1f} at {hit['at_fraction']:.2f}" if gap > 0 else "0 (on its bed)")
+        else:
+            row += [f"{entry['largest_gap_mm']:.1f}", f"{entry['state']} ({entry['elbow_angle_deg']:.0f} deg)"]
+        gaps.add_row(*row)
+    console.print(gaps)
+
+
+def check_outlines_table(console, model_file=None, out: Path | None = None) -> list[dict]:
+    """The model file's muscle outlines across the humerus (persival.model.cross_sections): a table
+    of the overlaps per level, and the JSON file."""
+    from rich.table import Table
+
+    from persival.model.cross_sections import LEVELS, outline_overlaps
+
+    kinematics = ArmKinematics(model_file)
+    rows = outline_overlaps(kinematics)
+    table = Table(title=f"{kinematics.spec.name}: outlines across the humerus overlapping each other or the bone "
+                        f"({len(rows)} at {len(LEVELS)} levels; muscles in their mesh poses)")
+    for column in ("level", "z (mm)", "outline", "inside", "vertices", "deepest (mm)"):
+        table.add_column(column, justify="right" if column in ("z (mm)", "vertices", "deepest (mm)") else "left")
+    for r in rows:
+        table.add_row(f"{100 * r['level']:.0f} %", f"{r['z_mm']:g}", r["outline"], r["inside"], f"{r['vertices']}/{r['of']}",
+                      f"{r['deepest_mm']:.1f}")
+    console.print(table if rows else "no outlines overlap at any level")
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps({"model": kinematics.spec.name, "levels": list(LEVELS), "overlaps": rows}, indent=1))
+        console.print(f"wrote {out}")
+    return rows
