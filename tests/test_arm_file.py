@@ -109,7 +109,7 @@ def test_simulate_command_refuses_bad_input_before_meshing(tmp_path):
     runner = CliRunner()
     out = tmp_path / "out"
     result = runner.invoke(app, ["simulate", "-a", "0.5,0,0", "--out", str(out)])
-    assert result.exit_code != 0 and "need 5 activations" in result.output
+    assert result.exit_code == 2 and "--activations needs 5 numbers" in result.output
     result = runner.invoke(app, ["simulate", "-a", "1.5,0,0,0,0", "--out", str(out)])
     assert result.exit_code == 2 and "[0, 1]" in result.output
     bad = tmp_path / "bad.toml"
