@@ -6,7 +6,7 @@ OUT    ?= results
 WEB    := persival/deploy/web
 WEB_SRC := $(WEB)/package.json $(WEB)/package-lock.json $(WEB)/build.mjs $(WEB)/index.html $(wildcard $(WEB)/src/*)
 
-.PHONY: setup web chromium run lint test bench clean
+.PHONY: setup web chromium run lint test test-fast bench clean
 
 setup: $(VENV)/.installed web
 
@@ -45,6 +45,11 @@ lint: setup
 
 test: setup chromium lint
 	$(BIN)/pytest -n 2 --dist loadfile -q
+
+# The quick loop while editing: everything not marked slow (FE solves of the arm, trained
+# networks, the browser), under 2 minutes on 2 cores.
+test-fast: setup lint
+	$(BIN)/pytest -n 2 --dist loadfile -q -m "not slow"
 
 bench: setup
 	$(BIN)/persival bench fe

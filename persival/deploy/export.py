@@ -33,8 +33,10 @@ TIERS = ("float32", "float16", "int8")
 LOAD_INPUT = "load_kg"  # optional second input of a graph that solves the joint equilibrium
 
 
-def _onnx(module: torch.nn.Module, example, path: Path, input_name, output_names: list[str]) -> None:
-    """Trace ``module`` to ONNX; ``example`` and ``input_name``: one tensor and name, or tuples of them."""
+def _onnx(module: torch.nn.Module, example, path: Path, input_name, output_names: list[str], fold: bool = True) -> None:
+    """Trace ``module`` to ONNX; ``example`` and ``input_name``: one tensor and name, or tuples of
+    them; ``fold``: constant folding at export (off keeps float16 weights and their casts, which the
+    runtime folds when it loads the file)."""
     examples = example if isinstance(example, tuple) else (example,)
     input_names = list(input_name) if isinstance(input_name, tuple) else [input_name]
     # the optional load has its own batch size: its default (one row, 0 kg) broadcasts over any batch
@@ -45,7 +47,7 @@ def _onnx(module: torch.nn.Module, example, path: Path, input_name, output_names
         # onnxscript, and its output is what the tier checks below verify. It warns that it is legacy.
         warnings.simplefilter("ignore", DeprecationWarning)
         torch.onnx.export(module.eval(), examples, str(path), input_names=input_names, output_names=output_names,
-                          dynamic_axes=axes, opset_version=OPSET, dynamo=False)
+                          dynamic_axes=axes, opset_version=OPSET, dynamo=False, do_constant_folding=fold)
 
 
 def _session(path: Path):
@@ -94,7 +96,8 @@ def _tiers(float32: Path, tiers=TIERS) -> dict[str, Path]:
     return {tier: path for tier, path in {"float32": float32, "float16": half, "int8": int8}.items() if tier in tiers}
 
 
-def _check_tiers(files: dict[str, Path], graph, probe: np.ndarray, names: list[str]) -> dict:
+def _check_tiers(files: dict[str, Path], graph, probe: np.ndarray, names: list[str],
+                 tolerance_mm: float = FLOAT32_TOLERANCE_MM) -> dict:
     """Max |onnxruntime - torch| per tier and output, on the probe activations."""
     with torch.no_grad():
         inputs = (torch.as_tensor(probe, dtype=torch.float32),)
@@ -107,9 +110,8 @@ def _check_tiers(files: dict[str, Path], graph, probe: np.ndarray, names: list[s
         out[tier] = {"file": path.name, "bytes": path.stat().st_size,
                      "max_abs_diff_vs_torch": diffs}
     worst = out["float32"]["max_abs_diff_vs_torch"]["positions"]
-    if worst > FLOAT32_TOLERANCE_MM:
-        raise RuntimeError(f"the float32 ONNX model differs from PyTorch by {worst:.2e} mm "
-                           f"(tolerance {FLOAT32_TOLERANCE_MM:.0e})")
+    if worst > tolerance_mm:
+        raise RuntimeError(f"the float32 ONNX model differs from PyTorch by {worst:.2e} mm (tolerance {tolerance_mm:.0e})")
     return out
 
 
@@ -149,12 +151,14 @@ def export_model(surrogate, out: str | Path, activation_model=None, motion_model
     names = ["positions", "elbow_angle_deg"] if surrogate.has_angle else ["positions"]
     takes_load = _takes_load(graph)
     if takes_load:
-        _onnx(graph, (torch.full((2, 5), 0.5), torch.zeros(2, 1)), tmp / "deformation.onnx", ("activations", LOAD_INPUT), names)
+        _onnx(graph, (torch.full((2, 5), 0.5), torch.zeros(2, 1)), tmp / "deformation.onnx", ("activations", LOAD_INPUT), names,
+              fold=getattr(surrogate, "export_constant_folding", True))
         _optional_load_input(tmp / "deformation.onnx")
     else:
         _onnx(graph, torch.full((2, 5), 0.5), tmp / "deformation.onnx", "activations", names)
     probe = np.random.default_rng(seed).uniform(0.0, 1.0, (n_probe, 5))
-    variants = _check_tiers(_tiers(tmp / "deformation.onnx", getattr(surrogate, "deploy_tiers", TIERS)), graph, probe, names)
+    variants = _check_tiers(_tiers(tmp / "deformation.onnx", getattr(surrogate, "deploy_tiers", TIERS)), graph, probe, names,
+                            getattr(surrogate, "export_tolerance_mm", FLOAT32_TOLERANCE_MM))
     surfaces = surrogate.surfaces
     source = surrogate.metadata.get("source", {})
     n = surfaces.n_nodes

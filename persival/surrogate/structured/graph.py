@@ -25,7 +25,11 @@ _FAR = 1e9  # distance of a scan interval without a stable root
 
 
 class StructuredGraph(torch.nn.Module):
-    def __init__(self, moments, shapes, dtype=torch.float32):
+    def __init__(self, moments, shapes, dtype=torch.float32, mode_dtype=None):
+        """``mode_dtype``: storage of the POD modes (default: float16 beside float32 arithmetic,
+        which halves the file and moves a surface by at most about 0.02 mm; the mean surfaces stay
+        in ``dtype``: in float16 they would move by 0.1 mm). The runtime casts them back once,
+        when it loads the graph (constant folding)."""
         super().__init__()
         as_t = lambda a: torch.as_tensor(np.asarray(a), dtype=dtype)  # noqa: E731
         basis = moments.theta_basis
@@ -46,14 +50,10 @@ class StructuredGraph(torch.nn.Module):
         self.interval_start = as_t(basis.breaks[:-1, None])
         self.interval_rows = as_t(np.transpose(basis.coefficients, (1, 0, 2)).reshape(n_int, 4 * n_t2))
         self.weight_rows = as_t(basis.coefficients.reshape(4 * n_int, n_t2))  # power-major, as torch_weights
-        # shapes: every muscle's coefficient data side by side, (2 n_t, n_a * R), each followed by a
-        # constant coefficient 1 (value 1, slope 0: the weights reproduce constants) whose mode is the
-        # mean surface, so the mean costs no operator of its own
-        one = np.zeros((n_t2, n_a, 1))
-        one[: n_t2 // 2] = 1.0
-        data = np.concatenate([np.concatenate([s.coefficient_data, one], axis=2) for s in shapes], axis=2)
+        # shapes: every muscle's coefficient data side by side, (2 n_t, n_a * R)
+        data = np.concatenate([s.coefficient_data for s in shapes], axis=2)
         self.coefficient_rows = as_t(data.reshape(n_t2, -1))
-        counts = [s.modes.shape[0] + 1 for s in shapes]
+        counts = [s.modes.shape[0] for s in shapes]
         expand = np.zeros((5, sum(counts)))
         ends = np.cumsum(counts)
         for s, end, r in zip(shapes, ends, counts):
@@ -62,11 +62,21 @@ class StructuredGraph(torch.nn.Module):
         self.slices = [(int(end - r), int(end)) for end, r in zip(ends, counts)]
         self.n_coefficients = int(sum(counts))
         self.node_counts = [s.n_nodes for s in shapes]
-        self.modes = [as_t(np.vstack([s.modes, (s.mean.reshape(-1, 3) - s.origin).reshape(1, -1)])) for s in shapes]
+        if mode_dtype is None:
+            mode_dtype = torch.float16 if dtype == torch.float32 else dtype
+        # buffers, not constants: the tracer then keeps the float16 storage and the cast in the graph
+        for i, s in enumerate(shapes):
+            self.register_buffer(f"modes_{i}", torch.as_tensor(s.modes, dtype=mode_dtype))
+        self.n_muscles = len(shapes)
+        self.offsets = [as_t(s.mean.reshape(-1, 3) - s.origin) for s in shapes]
         self.origins = [as_t(s.origin) for s in shapes]
         # Q(theta)^T entries of every muscle: (2 n_t, 9 n_m)
         self.rotation_rows = as_t(np.concatenate([s.rotation_data.reshape(-1, 3, 3).transpose(0, 2, 1).reshape(-1, 9)
                                                   for s in shapes], axis=1))
+
+    @property
+    def modes(self) -> list:
+        return [getattr(self, f"modes_{i}") for i in range(self.n_muscles)]
 
     def _bracket(self, g):
         """One-hot (b, n_g - 1) of the scan interval holding the stable root nearest the hanging
@@ -106,8 +116,8 @@ class StructuredGraph(torch.nn.Module):
         w = torch.cat([interval * (t2 * t), interval * t2, interval * t, interval], dim=1) @ self.weight_rows  # (b, 2 n_t)
         by_level = act_w.reshape(-1, 5, self.n_levels).transpose(1, 2) @ self.expand  # (b, n_a, R)
         coefficients = ((w @ self.coefficient_rows).reshape(-1, self.n_levels, self.n_coefficients) * by_level).sum(1)
-        rotations = (w @ self.rotation_rows).reshape(-1, len(self.modes), 3, 3)
-        surfaces = [(coefficients[:, lo:hi] @ modes).reshape(-1, n, 3) @ rotations[:, i] + origin
-                    for i, ((lo, hi), n, modes, origin) in enumerate(zip(self.slices, self.node_counts, self.modes,
-                                                                         self.origins))]
+        rotations = (w @ self.rotation_rows).reshape(-1, self.n_muscles, 3, 3)
+        surfaces = [((coefficients[:, lo:hi] @ modes.to(coefficients.dtype)).reshape(-1, n, 3) + offset) @ rotations[:, i]
+                    + origin for i, ((lo, hi), n, modes, offset, origin) in enumerate(
+                        zip(self.slices, self.node_counts, self.modes, self.offsets, self.origins))]
         return torch.cat(surfaces, dim=1), theta

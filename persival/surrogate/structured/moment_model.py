@@ -23,9 +23,9 @@ from persival.vocabulary import MUSCLES
 
 __all__ = ["ExternalMoments", "MomentModel", "ROOT_GRID_DEG", "NEWTON_STEPS"]
 
-ROOT_GRID_DEG = 0.25  # largest spacing of the sign scan that brackets the stable root
-# Newton steps on the bracket's cubic after regula falsi: the start is within about 1e-3 deg,
-# the first step brings it below 1e-8 deg (quadratic convergence), the second to round-off
+ROOT_GRID_DEG = 0.5  # largest spacing of the sign scan that brackets the stable root
+# Newton steps on the bracket's cubic after regula falsi: the start is within about 1e-2 deg,
+# the first step brings it below 1e-6 deg (quadratic convergence), the second to round-off
 NEWTON_STEPS = 2
 
 
