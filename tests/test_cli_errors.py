@@ -122,6 +122,8 @@ CASES = [
     ("moments", ["--out", "new.npz", "--levels", "0.2,1"], "levels not from 0 to 1", "must run from 0 to 1"),
     ("moments", ["--out", "afile"], "foreign file in the way of the table", "not a moment table"),
     ("moments", ["--out", "folder"], "folder where a file is expected", "is a folder, not a file"),
+    ("model init", ["--out", "afile"], "existing file (never overwritten)", "exists; pick a new name"),
+    ("model init", ["--out", "folder"], "folder where a file is expected", "is a folder, not a file"),
     ("motion", ["--table", "nosuch.npz", "--out", "new"], "missing table", "no such moment table"),
     ("motion", ["--table", "afile", "--out", "new"], "foreign table", "not a moment table"),
     ("motion", ["--table", "afile", "--out", "new", "--loads", "1,-2"], "negative load", "--loads must be >= 0"),
