@@ -19,6 +19,7 @@ from persival.model.geometry import swept_solid_mesh
 from persival.model.mesh import Tet10Mesh
 from persival.model.rotations import rotation_about
 from persival.model.state_cache import cached_mesh
+from persival.model.surface_muscle import place_muscle_surface, surface_muscle
 from persival.model.wrapping import WrapCylinder
 
 __all__ = ["ArmBody", "muscle_profile", "rotation_about"]
@@ -54,14 +55,29 @@ class ArmBody:
     """The meshed arm of a model file and mesh profile: geometry, kinematics, external loads."""
 
     def __init__(self, model_file: str | Path | None = None, profile: str = "quick"):
+        self._set_frame(model_file, profile)
+        self.mesh, self.muscle_cells, self.muscle_nodes = self._mesh()
+        self.material = self._material()
+
+    def _set_frame(self, model_file: str | Path | None, profile: str) -> None:
+        """The model file, the joint's frame and the muscles' own surfaces read, repaired and
+        placed (SPEC 3.4): every check of the model before any meshing."""
         self.spec, self.model_hash = load_model_file(model_file)
         self.profile = profile
         self.spec.profile(profile)  # unknown profile -> clear error
         joint = self.spec.joint
         self.axis = np.asarray(joint.axis, dtype=float) / np.linalg.norm(joint.axis)
         self.centre = np.asarray(joint.centre, dtype=float)
-        self.mesh, self.muscle_cells, self.muscle_nodes = self._mesh()
-        self.material = self._material()
+        self.surfaces = {m.name: place_muscle_surface(m, np.asarray(m.origin, dtype=float), self.body_end(m, m.mesh_angle_deg))
+                         for m in self.spec.ordered_muscles() if m.surface is not None}
+
+    @classmethod
+    def frame(cls, model_file: str | Path | None = None, profile: str = "quick") -> ArmBody:
+        """The model's kinematics and placed surfaces without a mesh (seconds): a command's check
+        of its --model before it writes anything."""
+        body = object.__new__(ArmBody)
+        body._set_frame(model_file, profile)
+        return body
 
     # -- geometry -----------------------------------------------------------------------------
     def forearm_point(self, p: np.ndarray, theta_deg: float) -> np.ndarray:
@@ -92,6 +108,13 @@ class ArmBody:
         """Length (mm) of the muscle's centre line in its mesh pose: the scale of its tissue layout."""
         return float(np.linalg.norm(np.diff(self.centre_line(muscle), axis=0), axis=1).sum())
 
+    def body_length(self, muscle: Muscle) -> float:
+        """Length (mm) the muscle's tissue layout is measured along: its centre line, or for a muscle
+        from a surface the centre line of its Laplace level sets (persival.model.laplace_fibres)."""
+        if muscle.surface is None:
+            return self.centre_line_length(muscle)
+        return float(self.mesh.cell_data["body_length"][self.muscle_cells[muscle.name][0]])
+
     def _mesh(self):
         """The arm's mesh (from the on-disk cache when this model and profile were meshed before)
         and each muscle's cells and nodes (contiguous ranges, in file order)."""
@@ -107,11 +130,23 @@ class ArmBody:
     def _build_mesh(self) -> Tet10Mesh:
         """gmsh: every muscle's swept solid, numbered one after the other (cell data "muscle")."""
         points, cells, node_sets, cell_data = [], [], {}, {"muscle": [], "fibre": [], "arclength": []}
+        if self.surfaces:  # phi of the Laplace fibres and the length the tissue layout is scaled to
+            cell_data.update(laplace=[], body_length=[])
         offset = 0
         for index, muscle in enumerate(self.spec.ordered_muscles()):
-            line = self.centre_line(muscle)
-            radius, _ = muscle_profile(muscle, np.linspace(0.0, 1.0, len(line)), self.centre_line_length(muscle))
-            mesh = swept_solid_mesh(line, radius, self.spec.mesh_size(self.profile, muscle.name))
+            size = self.spec.mesh_size(self.profile, muscle.name)
+            if muscle.name in self.surfaces:
+                own = surface_muscle(muscle, self.surfaces[muscle.name], size)
+                mesh, length = own.mesh, own.fibres.length
+            else:
+                line = self.centre_line(muscle)
+                length = self.centre_line_length(muscle)
+                radius, _ = muscle_profile(muscle, np.linspace(0.0, 1.0, len(line)), length)
+                mesh = swept_solid_mesh(line, radius, size)
+                mesh.cell_data["laplace"] = np.full(mesh.n_cells, np.nan)
+            if self.surfaces:
+                cell_data["laplace"].append(mesh.cell_data["laplace"])
+                cell_data["body_length"].append(np.full(mesh.n_cells, length))
             points.append(mesh.points)
             cells.append(mesh.cells + offset)
             node_sets[f"{muscle.name}/origin"] = mesh.node_sets["origin"] + offset
@@ -132,7 +167,7 @@ class ArmBody:
         gamma, k, pre = np.empty(n), np.empty(n), np.empty(n)
         for muscle in self.spec.ordered_muscles():
             cells = self.muscle_cells[muscle.name]
-            _, g = muscle_profile(muscle, self.mesh.cell_data["arclength"][cells], self.centre_line_length(muscle))
+            _, g = muscle_profile(muscle, self.mesh.cell_data["arclength"][cells], self.body_length(muscle))
             gamma[cells] = g
             k[cells] = g * muscle.bulk_modulus[0] + (1.0 - g) * muscle.bulk_modulus[1]
             pre[cells] = muscle.fibre_prestretch
