@@ -53,23 +53,25 @@ class PlacedSurface:
     end_distance_mm: tuple[float, float]  # origin_point's and insertion_point's distance to the surface
 
 
-def read_surface(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (n, 3) and triangles (m, 3) of a surface file, as written (no merging, no repair)."""
+def read_surface(path: str | Path, label: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (n, 3) and triangles (m, 3) of a surface file, as written (no merging, no repair).
+    ``label`` heads every message (default: the path)."""
     path = Path(path)
+    label = label or str(path)
     suffix = path.suffix.lower()
     if suffix not in SURFACE_FORMATS:
-        raise SurfaceError(f"{path}: unknown surface format {suffix!r}; use one of {', '.join(SURFACE_FORMATS)}")
+        raise SurfaceError(f"{label}: unknown surface format {suffix!r}; use one of {', '.join(SURFACE_FORMATS)}")
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such surface file")
+        raise FileNotFoundError(f"{label}: no such surface file")
     try:
         vertices, faces = _read_vtk(path) if suffix in (".vtk", ".vtp") else _read_trimesh(path)
     except SurfaceError:
         raise
     except Exception as exc:  # every reader fails its own way on a file that is no mesh
-        raise SurfaceError(f"{path}: not a readable {suffix[1:].upper()} triangle surface ({type(exc).__name__}: "
+        raise SurfaceError(f"{label}: not a readable {suffix[1:].upper()} triangle surface ({type(exc).__name__}: "
                            f"{str(exc).splitlines()[0] if str(exc) else 'unreadable'})") from None
     if len(faces) < 4 or len(vertices) < 4:
-        raise SurfaceError(f"{path}: not a triangle surface ({len(vertices)} vertices, {len(faces)} triangles)")
+        raise SurfaceError(f"{label}: not a triangle surface ({len(vertices)} vertices, {len(faces)} triangles)")
     return vertices, faces
 
 
@@ -78,7 +80,7 @@ def _read_trimesh(path: Path):
 
     mesh = trimesh.load(str(path), force="mesh", process=False)
     if not isinstance(mesh, trimesh.Trimesh):
-        raise SurfaceError(f"{path}: holds no triangles")
+        raise ValueError("holds no triangles")  # reported with the label by read_surface
     return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
 
 
@@ -101,7 +103,8 @@ def place_surface(path: str | Path, units: str, origin_point, insertion_point, s
     message (e.g. "muscle 'biceps'")."""
     if units not in UNITS:
         raise SurfaceError(f"{name}: surface_units must be one of {', '.join(UNITS)}, got {units!r}")
-    raw_vertices, raw_faces = read_surface(path)
+    label = f"{name}: surface {Path(path).name}"
+    raw_vertices, raw_faces = read_surface(path, label)
     factor = UNITS[units]
     p_origin = np.round(np.asarray(origin_point, dtype=float) * factor, ROUND_DECIMALS)
     p_insertion = np.round(np.asarray(insertion_point, dtype=float) * factor, ROUND_DECIMALS)
@@ -111,7 +114,6 @@ def place_surface(path: str | Path, units: str, origin_point, insertion_point, s
     if surface_length == 0:
         raise SurfaceError(f"{name}: origin_point and insertion_point coincide")
     _check_size(name, units, surface_length / factor, model_length)
-    label = f"{name}: surface {Path(path).name}"
     surface = repair_surface(np.round(raw_vertices * factor, ROUND_DECIMALS), raw_faces, label)
     distances = _distances(surface, np.array([p_origin, p_insertion]))
     tolerance = max(FAR_SHARE * surface_length, FAR_FLOOR_MM)
