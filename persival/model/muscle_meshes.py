@@ -72,7 +72,7 @@ def _mesh_one(body: ArmBody, muscle: Muscle, out: Path) -> dict:
                      scale=placed.scale, end_point_distance_mm=list(placed.end_distance_mm),
                      length_between_points_mm=float(np.linalg.norm(placed.insertion - placed.origin)),
                      origin_insertion_mm=float(np.linalg.norm(placed.target_insertion - placed.origin)),
-                     min_quality=volume.min_quality)
+                     min_quality=volume.min_quality, straightened_elements=volume.straightened)
     else:
         line = body.centre_line(muscle)
         length = body.centre_line_length(muscle)
