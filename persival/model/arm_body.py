@@ -1,7 +1,8 @@
 """The arm's fixed parts: its mesh and material, the joint's kinematics and the loads on the hinge.
 
 SPEC 3.3. Each muscle is a swept solid around its centre line (origin, via points, insertion
-in the muscle's mesh pose), meshed stress free by gmsh and graded from tendon to belly; the
+in the muscle's mesh pose), meshed stress free by gmsh and graded from tendon to belly, or a
+segmented surface placed between its origin and insertion (SPEC 3.4, persival.model.surface_muscle); the
 forearm turns about the elbow hinge, and gravity on forearm plus hand and a passive joint moment
 that stiffens beyond the anatomical limits load the hinge. Everything here is fixed once the
 model file and mesh profile are chosen; the solved states live in :mod:`persival.model.arm`.

@@ -4,7 +4,9 @@ The model is data: bones, the elbow hinge, the forearm's weight, passive joint l
 five muscles (geometry, tissue layout, fibre prestretch, bulk moduli) and mesh profiles.
 Coordinates in mm. Upper-arm points are in the fixed humerus frame; forearm points are given
 in the forearm frame at theta = 0 (full extension, forearm hanging along -z) and rotate about
-the hinge axis with the elbow angle (flexion positive).
+the hinge axis with the elbow angle (flexion positive). A muscle may take its shape from a surface
+file (SPEC 3.4, persival.model.surface_import); its path is resolved against the model file's
+folder and its content is part of the model's hash.
 """
 
 from __future__ import annotations
