@@ -133,6 +133,9 @@ CASES = [
     ("simulate", ["-a", "0,0,0,0,0", "--model", "metres.toml", "--out", "new"], "surface in metres read as mm",
      "likely in m "),
     ("tables", ["--model", "two.toml"], "surface of two bodies", "2 disconnected bodies"),
+    ("run", ["--model", "hole.toml", "--out", "new"], "surface with a large hole", "open surface with a hole"),
+    ("run", ["--model", "good.toml", "--simulator", "analytic", "--out", "new"], "model file with the analytic stand-in",
+     "--model needs --simulator arm"),
     ("motion", ["--table", "nosuch.npz", "--out", "new"], "missing table", "no such moment table"),
     ("motion", ["--table", "afile", "--out", "new"], "foreign table", "not a moment table"),
     ("motion", ["--table", "afile", "--out", "new", "--loads", "1,-2"], "negative load", "--loads must be >= 0"),
@@ -189,6 +192,7 @@ def _bad_surfaces(root: Path) -> None:
     model_with_surface(root / "two.toml", "two.obj")
     model_with_surface(root / "notmesh.toml", "notmesh.stl")
     model_with_surface(root / "far.toml", "spindle.obj", origin_point=(100.0, 0.0, 0.0))
+    model_with_surface(root / "good.toml", "spindle.obj")
     model_with_surface(root / "metres.toml", "metres.obj", insertion_point=(0.0, 0.0, SPINDLE_LENGTH / 1000.0))
 
 
