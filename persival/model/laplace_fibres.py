@@ -42,8 +42,11 @@ class LaplaceFibres:
     length: float  # mm, the centre line's length
 
 
-def laplace_fibres(mesh: Tet10Mesh, origin_nodes: np.ndarray, insertion_nodes: np.ndarray) -> LaplaceFibres:
-    """Solve the Laplace problem (module docstring) between two node sets of ``mesh``."""
+def laplace_fibres(mesh: Tet10Mesh, origin_nodes: np.ndarray, insertion_nodes: np.ndarray,
+                   ends: tuple[np.ndarray, np.ndarray] | None = None) -> LaplaceFibres:
+    """Solve the Laplace problem (module docstring) between two node sets of ``mesh``. ``ends``:
+    the centre line's two end points (default: the centroids of the two node sets; on a coarse
+    mesh those lie up to an element inside a rounded tip, and the muscle would come out short)."""
     corners = mesh.cells[:, :4]
     used = np.unique(corners)
     local = np.full(mesh.n_nodes, -1, dtype=np.int64)
@@ -58,7 +61,8 @@ def laplace_fibres(mesh: Tet10Mesh, origin_nodes: np.ndarray, insertion_nodes: n
     phi_nodes[used] = phi
     ends_of_edges = mesh.cells[:, tet10.EDGES]  # (m, 6, 2): the corners each mid-side node sits between
     phi_nodes[mesh.cells[:, 4:]] = phi_nodes[ends_of_edges].mean(axis=2)
-    ends = (mesh.points[np.asarray(origin_nodes)].mean(axis=0), mesh.points[np.asarray(insertion_nodes)].mean(axis=0))
+    if ends is None:
+        ends = (mesh.points[np.asarray(origin_nodes)].mean(axis=0), mesh.points[np.asarray(insertion_nodes)].mean(axis=0))
     centroids = mesh.points[corners].mean(axis=1)
     line, line_phi = _centre_line(phi_cells, centroids, volumes, ends)
     arclength = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))])

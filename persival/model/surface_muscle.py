@@ -53,7 +53,7 @@ def surface_muscle(muscle: Muscle, placed: PlacedSurface, mesh_size: float) -> S
     if np.intersect1d(origin_nodes, insertion_nodes).size:
         raise MeshError(f"muscle {muscle.name!r}: its origin and insertion faces touch; the surface is too short "
                         "or too coarse for its tendon radii")
-    fibres = laplace_fibres(mesh, origin_nodes, insertion_nodes)
+    fibres = laplace_fibres(mesh, origin_nodes, insertion_nodes, ends=(placed.origin, placed.insertion))
     mesh.node_sets = {"origin": origin_nodes, "insertion": insertion_nodes}
     mesh.cell_data = {"fibre": fibres.fibre, "arclength": fibres.position, "laplace": fibres.phi}
     return SurfaceMuscle(mesh, placed, volume, fibres)
