@@ -246,13 +246,19 @@ def _distance_to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
 PHYSICS_VERSION = 2
 
 
+# Bumped whenever the code that turns a surface file into a mesh (repair, placement, meshing,
+# Laplace fibres) changes what it gives, for the same reason as PHYSICS_VERSION.
+SURFACE_VERSION = 1
+
+
 def model_hash(text: str, surfaces: dict[str, bytes] | None = None) -> str:
     """sha256 of the model file's text and the physics version (provenance key of every store),
     and of the muscles' surface files where it has any (their content, not their names)."""
     digest = hashlib.sha256(f"persival-physics-{PHYSICS_VERSION}\n{text}".encode()).hexdigest()
     if not surfaces:
         return digest  # the built-in model's hash is the same as before surfaces existed
-    lines = [digest] + [f"{name} {hashlib.sha256(data).hexdigest()}" for name, data in sorted(surfaces.items())]
+    lines = [digest, f"persival-surfaces-{SURFACE_VERSION}"]
+    lines += [f"{name} {hashlib.sha256(data).hexdigest()}" for name, data in sorted(surfaces.items())]
     return hashlib.sha256("\n".join(lines).encode()).hexdigest()
 
 
