@@ -64,6 +64,7 @@ class ArmBody:
         """The model file, the joint's frame and the muscles' own surfaces read, repaired and
         placed (SPEC 3.4): every check of the model before any meshing."""
         self.spec, self.model_hash = load_model_file(model_file)
+        self.model_file = None if model_file is None else str(model_file)  # None: the built-in model
         self.profile = profile
         self.spec.profile(profile)  # unknown profile -> clear error
         joint = self.spec.joint
