@@ -214,3 +214,18 @@ def test_a_model_file_enters_the_run_digests_only_when_given():
     own = RunConfig(model="/data/my_arm.toml", model_hash="abc")
     assert _stage_inputs("campaign", own, {})["settings"]["model_hash"] == "abc"
     assert "model_hash" not in _stage_inputs("sg", own, {})["settings"]
+
+
+def test_a_fin_on_an_edge_is_removed_and_counted():
+    """A stray triangle on an edge of the surface (three triangles on one edge: non-manifold) goes,
+    not one of the surface's own; what is left is the clean spindle."""
+    from persival.model.surface_repair import repair_surface
+
+    vertices, faces = spindle()
+    a, b = faces[200][:2]
+    fin = np.array([[a, b, len(vertices)]])
+    apex = 0.5 * (vertices[a] + vertices[b]) + [0.0, 0.0, 30.0]
+    for position in (0, len(faces)):  # the fin first in the file, and last
+        repaired = repair_surface(np.vstack([vertices, apex]), np.insert(faces, position, fin, axis=0))
+        assert repaired.repairs["fixed non-manifold edges (triangles removed)"] == 1
+        assert oriented(repaired.faces) == oriented(faces) and len(repaired.vertices) == len(vertices)

@@ -122,16 +122,17 @@ def repair_surface(vertices: np.ndarray, faces: np.ndarray, name: str = "surface
 
 
 def _non_manifold_extras(faces: np.ndarray) -> np.ndarray:
-    """Triangles beyond the first two on each edge shared by more than two (the fins and sheets
-    that make an edge non-manifold); sorted indices."""
+    """Triangles to remove so that no edge has more than two: on each such edge, those with the
+    most open edges go first (a fin or a dangling sheet), then the later ones in the file."""
     edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
     owner = np.repeat(np.arange(len(faces)), 3)
     _, inverse, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
     inverse = inverse.ravel()
-    extras = set()
+    open_edges = (counts[inverse] == 1).reshape(-1, 3).sum(axis=1)
+    extras: set[int] = set()
     for edge in np.flatnonzero(counts > 2):
-        sharing = [f for f in owner[inverse == edge] if f not in extras]
-        extras.update(sharing[2:])
+        sharing = sorted((f for f in owner[inverse == edge] if f not in extras), key=lambda f: (-open_edges[f], f))
+        extras.update(sharing[: max(0, len(sharing) - 2)])  # some may have gone for another edge already
     return np.array(sorted(extras), dtype=np.int64)
 
 
