@@ -248,7 +248,7 @@ PHYSICS_VERSION = 2
 
 # Bumped whenever the code that turns a surface file into a mesh (repair, placement, meshing,
 # Laplace fibres) changes what it gives, for the same reason as PHYSICS_VERSION.
-SURFACE_VERSION = 1
+SURFACE_VERSION = 2  # 2: the Laplace centre line smoothed
 
 
 def model_hash(text: str, surfaces: dict[str, bytes] | None = None) -> str:

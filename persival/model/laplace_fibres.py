@@ -122,4 +122,8 @@ def _centre_line(phi, centroids, volumes, ends) -> tuple[np.ndarray, np.ndarray]
     points = np.column_stack([np.bincount(slab, volumes * centroids[:, k], SLABS) for k in range(3)])[filled]
     points /= weight[filled, None]
     slab_phi = np.bincount(slab, volumes * phi, SLABS)[filled] / weight[filled]
-    return np.vstack([ends[0], points, ends[1]]), np.concatenate([[0.0], slab_phi, [1.0]])
+    line = np.vstack([ends[0], points, ends[1]])
+    # one (1, 2, 1) / 4 pass: a slab's centroid wanders across the section by the cells it happens
+    # to hold, which lengthened a 330 mm spindle's line to 336 mm (smoothed: 330.5)
+    line[1:-1] = 0.25 * (line[:-2] + 2.0 * line[1:-1] + line[2:])
+    return line, np.concatenate([[0.0], slab_phi, [1.0]])
