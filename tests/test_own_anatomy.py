@@ -114,7 +114,7 @@ def test_laplace_fibres_follow_the_spindle_from_origin_to_insertion(surfaces):
     along = fibre @ line
     assert along.min() > 0.95 and along.mean() > 0.99  # along the long axis, never backwards
     axial = (mesh.points[mesh.cells[:, :4]].mean(axis=1) - placed.origin) @ line / SPINDLE_LENGTH
-    assert np.abs(mesh.cell_data["arclength"] - axial).max() < 0.03  # position: origin 0 -> insertion 1
+    assert np.abs(mesh.cell_data["arclength"] - axial).max() < 0.02  # position: origin 0 -> insertion 1
     assert np.all(np.diff(mesh.cell_data["laplace"][np.argsort(axial)][::50]) > -0.05)
     assert own.fibres.length == pytest.approx(SPINDLE_LENGTH, rel=0.01)
     # the attachment faces: the caps (4 and 5 mm tendon radius: the whole cap of radius 4 and its rim)
