@@ -2,11 +2,21 @@
 
 from __future__ import annotations
 
+import json
+
+import numpy as np
+import pytest
+from surface_files import SPINDLE_LENGTH, model_with_surface, spindle, with_defects, write_obj, write_stl
 from typer.testing import CliRunner
 
 from persival.cli import app
+from persival.model.arm_body import ArmBody
 from persival.model.arm_file import load_model_file
 from persival.model.defaults import default_model_path
+from persival.model.surface_mesh import volume_mesh
+from persival.model.surface_muscle import surface_muscle
+
+COARSE_BICEPS = 16.0  # mm, the coarse profile's biceps element size
 
 
 def test_model_init_writes_the_built_in_model(tmp_path):
@@ -18,18 +28,6 @@ def test_model_init_writes_the_built_in_model(tmp_path):
 
 
 # -- muscles from surfaces -------------------------------------------------------------------------
-
-import json  # noqa: E402
-
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-from surface_files import SPINDLE_LENGTH, model_with_surface, spindle, with_defects, write_obj, write_stl  # noqa: E402
-
-from persival.model.arm_body import ArmBody  # noqa: E402
-from persival.model.surface_mesh import volume_mesh  # noqa: E402
-from persival.model.surface_muscle import surface_muscle  # noqa: E402
-
-COARSE_BICEPS = 16.0  # mm, the coarse profile's biceps element size
 
 
 def oriented(faces) -> set:
