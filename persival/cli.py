@@ -36,10 +36,12 @@ def _register() -> None:
     from persival.campaign import commands as campaign_commands
     from persival.deploy import commands as deploy_commands
     from persival.evaluate import commands as evaluate_commands
+    from persival.model import commands as model_commands
     from persival.surrogate import commands as surrogate_commands
     from persival.tables import commands as tables_commands
 
     run_command.register(app)
+    model_commands.register(app)
     campaign_commands.register(app, bench_app)
     tables_commands.register(app)
     surrogate_commands.register(app, bench_app)

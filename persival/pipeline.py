@@ -1,6 +1,6 @@
 """`persival run`: the end-to-end job, one stage after the other, each reading the last one's artifact.
 
-    1 model     OUT/model/     geometry.json, mesh_*.vtu, bone_*.vtu (built-in arm, chosen profile)
+    1 model     OUT/model/     geometry.json, mesh_*.vtu, bone_*.vtu (the built-in arm or --model, chosen profile)
     2 tables    OUT/tables/    the FE arm's per-muscle response tables (kept in the state cache) + moments.npz
     3 fe        OUT/fe/        three FE equilibria of the arm (state.json + VTU) and arm.png
     4 campaign  OUT/campaign/  campaign.zarr (sparse-grid design) + held_out.zarr (random states)
@@ -35,6 +35,8 @@ __all__ = ["RunConfig", "run", "STAGES"]
 @dataclass
 class RunConfig:
     profile: str = "quick"
+    model: str | None = None  # model file (absolute path); None: the built-in arm
+    model_hash: str | None = None  # its hash (text and surface files): what the stages' digests see of it
     simulator: str = "arm"  # the FE arm from its response tables; "analytic": the closed-form stand-in (tests)
     level: int = 1  # sparse-grid level of the campaign (1: 243 states, 2: 1053)
     held_out: int = 25  # random states of the same simulator for the error-propagation table
@@ -70,6 +72,9 @@ STAGES = [
 ]
 
 
+#: settings that are part of a stage's digest only when set
+OPTIONAL_SETTINGS = {"model_hash"}
+
 #: stages whose folder is not named after them
 FOLDERS = {"train": "networks"}
 
@@ -81,8 +86,10 @@ def _digest(obj) -> str:
 def _stage_inputs(name: str, config: RunConfig, done: dict) -> dict:
     keys = stages.SETTINGS[name]
     upstream = dict((s[0], s[2]) for s in STAGES)[name]
+    # a model file is an input only when given: the built-in arm's digests stay as they were
+    settings = {k: getattr(config, k) for k in keys if k not in OPTIONAL_SETTINGS or getattr(config, k) is not None}
     # a stage left out of this run (fe with --no-fe-states) is no input
-    return {"settings": {k: getattr(config, k) for k in keys}, "upstream": {u: done[u]["digest"] for u in upstream if u in done}}
+    return {"settings": settings, "upstream": {u: done[u]["digest"] for u in upstream if u in done}}
 
 
 def run(out: str | Path, config: RunConfig | None = None, console=None) -> dict:

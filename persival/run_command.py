@@ -15,8 +15,10 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def run(
         out: Path = typer.Option(Path("results"), "--out", help="Results directory (resumed stage by stage)."),
+        model: Path | None = typer.Option(None, "--model", help="Model file (TOML; `persival model init` writes one to "
+                                          "edit); default: the built-in arm."),
         profile: str = typer.Option(
-            "quick", "--profile", help=profiles_help("Mesh profile of the built-in arm", model_option=False)),
+            "quick", "--profile", help=profiles_help()),
         simulator: str = typer.Option(
             "arm", "--simulator", help="Campaign simulator: arm (the FE arm, from its response tables, built once "
             "per model) or analytic (closed-form stand-in for tests, seconds)."),
@@ -32,12 +34,12 @@ def register(app: typer.Typer) -> None:
         fe_states: bool = typer.Option(True, "--fe-states/--no-fe-states", help="Solve the three showcase FE states."),
     ) -> None:
         """End to end: model -> FE -> campaign -> SG -> inverse -> data -> train -> export -> evaluate -> report."""
-        from persival.model.arm_file import load_model_file
+        from persival.model.arm_body import ArmBody
         from persival.pipeline import RunConfig
         from persival.pipeline import run as run_pipeline
 
         with user_errors():  # before anything is written
-            load_model_file()[0].profile(profile)
+            frame = ArmBody.frame(model, profile)  # the model file, its profile and its own surfaces
             check_output_dir(out)
             if simulator not in ("analytic", "arm"):
                 raise ValueError(f"--simulator must be analytic or arm, got {simulator!r}")
@@ -46,7 +48,11 @@ def register(app: typer.Typer) -> None:
             for given in (campaign_store, held_out_store):
                 if given is not None and not (given / "zarr.json").is_file():
                     raise FileNotFoundError(f"{given}: not a campaign store (no zarr.json)")
-            config = RunConfig(profile=profile, simulator=simulator, level=level, held_out=held_out,
+            if model is not None and simulator != "arm":
+                raise ValueError("--model needs --simulator arm (the analytic stand-in has no model file)")
+            config = RunConfig(profile=profile, simulator=simulator,
+                               model=None if model is None else str(model.resolve()),
+                               model_hash=None if model is None else frame.model_hash, level=level, held_out=held_out,
                                campaign_store=None if campaign_store is None else str(campaign_store.resolve()),
                                held_out_store=None if held_out_store is None else str(held_out_store.resolve()),
                                moment_table=None if moment_table is None else str(moment_table.resolve()),

@@ -28,8 +28,8 @@ def model(out: Path, config, console) -> dict:
     from persival.model.output import bone_surfaces, muscle_submesh
 
     folder = out / "model"
-    with console.status(f"meshing the built-in arm ({config.profile} profile)"):
-        arm = ArmModel(profile=config.profile)
+    with console.status(f"meshing the arm of {config.model or 'the built-in model'} ({config.profile} profile)"):
+        arm = ArmModel(config.model, profile=config.profile)
     geometry = {"model": arm.spec.name, "model_hash": arm.model_hash, "profile": config.profile, "muscles": {}}
     for muscle in arm.spec.ordered_muscles():
         nodes, cells = muscle_submesh(arm, muscle.name)
@@ -70,7 +70,7 @@ def tables(out: Path, config, console) -> dict:
     with progress_bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                       console=console) as bar:
         task = bar.add_task("FE arm: meshing, rest states", total=None)
-        table = ensure_tables(None, config.profile, None, lambda done, total: bar.update(
+        table = ensure_tables(config.model, config.profile, None, lambda done, total: bar.update(
             task, completed=done, total=total, description="FE arm: response table columns (dask)"))
     moments = table.moment_table()
     moments.save(out / "tables" / "moments.npz")
@@ -93,7 +93,7 @@ def fe(out: Path, config, console) -> dict:
     from persival.model.output import write_state
     from persival.model.progress import ConsoleProgress
 
-    arm = ArmModel(profile=config.profile)
+    arm = ArmModel(config.model, profile=config.profile)
     solver = None
     if config.simulator == "arm":
         from persival.tables.open import open_tables
@@ -135,6 +135,8 @@ def campaign(out: Path, config, console) -> dict:
 
     folder = out / "campaign"
     options = {"profile": config.profile, "method": "tables"} if config.simulator == "arm" else {}
+    if config.simulator == "arm" and config.model is not None:
+        options["model_file"] = config.model
     spec = SimulatorSpec(config.simulator, options)
     stores = {}
     for name, given, design in (("campaign", config.campaign_store, Design.sparse_grid(config.level)),
@@ -327,10 +329,11 @@ def report(out: Path, config, console) -> dict:
 
 
 SETTINGS = {
-    "model": ["profile"], "tables": ["profile", "simulator"], "fe": ["profile", "simulator"],
-    "campaign": ["profile", "simulator", "level", "held_out", "campaign_store", "held_out_store", "seed"],
-    "structured": ["profile"],
-    "sg": [], "inverse": [], "motion": ["moment_table", "profile"], "data": ["samples", "angle_fraction", "seed"],
+    "model": ["profile", "model_hash"], "tables": ["profile", "simulator", "model_hash"],
+    "fe": ["profile", "simulator", "model_hash"],
+    "campaign": ["profile", "simulator", "level", "held_out", "campaign_store", "held_out_store", "seed", "model_hash"],
+    "structured": ["profile", "model_hash"],
+    "sg": [], "inverse": [], "motion": ["moment_table", "profile", "model_hash"], "data": ["samples", "angle_fraction", "seed"],
     "train": ["pod_folds", "pod_epochs", "paper_folds", "paper_epochs", "seed"], "export": [],
     "evaluate": ["seed", "bench"], "report": [],
 }

@@ -135,6 +135,20 @@ CASES = [
     ("moments", ["--out", "new.npz", "--levels", "0.2,1"], "levels not from 0 to 1", "must run from 0 to 1"),
     ("moments", ["--out", "afile"], "foreign file in the way of the table", "not a moment table"),
     ("moments", ["--out", "folder"], "folder where a file is expected", "is a folder, not a file"),
+    ("model init", ["--out", "afile"], "existing file (never overwritten)", "exists; pick a new name"),
+    ("model init", ["--out", "folder"], "folder where a file is expected", "is a folder, not a file"),
+    ("mesh", ["--model", "hole.toml", "--out", "new"], "surface with a large hole", "open surface with a hole"),
+    ("mesh", ["--model", "two.toml", "--out", "new"], "surface of two bodies", "2 disconnected bodies"),
+    ("mesh", ["--model", "notmesh.toml", "--out", "new"], "surface file that is not a mesh", "not a triangle surface"),
+    ("mesh", ["--model", "far.toml", "--out", "new"], "origin_point far from the surface", "from the surface"),
+    ("mesh", ["--model", "metres.toml", "--out", "new"], "surface in metres read as mm", "likely in m "),
+    ("mesh", ["--model", "hole.toml", "--muscles", "deltoid", "--out", "new"], "unknown muscle", "--muscles must be"),
+    ("simulate", ["-a", "0,0,0,0,0", "--model", "metres.toml", "--out", "new"], "surface in metres read as mm",
+     "likely in m "),
+    ("tables", ["--model", "two.toml"], "surface of two bodies", "2 disconnected bodies"),
+    ("run", ["--model", "hole.toml", "--out", "new"], "surface with a large hole", "open surface with a hole"),
+    ("run", ["--model", "good.toml", "--simulator", "analytic", "--out", "new"], "model file with the analytic stand-in",
+     "--model needs --simulator arm"),
     ("motion", ["--table", "nosuch.npz", "--out", "new"], "missing table", "no such moment table"),
     ("motion", ["--table", "afile", "--out", "new"], "foreign table", "not a moment table"),
     ("motion", ["--table", "afile", "--out", "new", "--loads", "1,-2"], "negative load", "--loads must be >= 0"),
@@ -171,7 +185,28 @@ def workdir(tmp_path_factory):
     (root / "bad.csv").write_text("0.1,0.2,0.3,0.4,1.5\n")
     (root / "nan.csv").write_text("0.1,0.2,nan,0.4,0.5\n")
     run_campaign(root / "random.zarr", Design.random(3, seed=0), SimulatorSpec("analytic", {}), scheduler=INLINE, progress=False)
+    _bad_surfaces(root)
     return root
+
+
+def _bad_surfaces(root: Path) -> None:
+    """Model files whose biceps comes from a surface that must be refused (docs/own_anatomy.md)."""
+    import numpy as np
+    from surface_files import SPINDLE_LENGTH, model_with_surface, spindle, write_obj
+
+    vertices, faces = spindle()
+    cut = [row * 32 + column for row in range(12, 18) for column in range(8)]  # a 6 x 4 patch of the belly
+    write_obj(root / "hole.obj", vertices, np.delete(faces, cut, axis=0))
+    write_obj(root / "two.obj", np.vstack([vertices, vertices + [60.0, 0.0, 0.0]]), np.vstack([faces, faces + len(vertices)]))
+    write_obj(root / "spindle.obj", vertices, faces)
+    write_obj(root / "metres.obj", vertices / 1000.0, faces)
+    (root / "notmesh.stl").write_text("a scanner's log file, no triangles\n")
+    model_with_surface(root / "hole.toml", "hole.obj")
+    model_with_surface(root / "two.toml", "two.obj")
+    model_with_surface(root / "notmesh.toml", "notmesh.stl")
+    model_with_surface(root / "far.toml", "spindle.obj", origin_point=(100.0, 0.0, 0.0))
+    model_with_surface(root / "good.toml", "spindle.obj")
+    model_with_surface(root / "metres.toml", "metres.obj", insertion_point=(0.0, 0.0, SPINDLE_LENGTH / 1000.0))
 
 
 def test_every_subcommand_has_a_bad_input():

@@ -1,7 +1,8 @@
 """The arm's fixed parts: its mesh and material, the joint's kinematics and the loads on the hinge.
 
 docs/theory.md, 3.2. Each muscle is a swept solid around its centre line (origin, via points, insertion
-in the muscle's mesh pose), meshed stress free by gmsh and graded from tendon to belly; the
+in the muscle's mesh pose), meshed stress free by gmsh and graded from tendon to belly, or a
+segmented surface placed between its origin and insertion (docs/own_anatomy.md, persival.model.surface_muscle); the
 forearm turns about the elbow hinge, and gravity on forearm plus hand and a passive joint moment
 that stiffens beyond the anatomical limits load the hinge. Everything here is fixed once the
 model file and mesh profile are chosen; the solved states live in :mod:`persival.model.arm`.
@@ -19,6 +20,7 @@ from persival.model.geometry import swept_solid_mesh
 from persival.model.mesh import Tet10Mesh
 from persival.model.rotations import rotation_about
 from persival.model.state_cache import cached_mesh
+from persival.model.surface_muscle import place_muscle_surface, surface_muscle
 from persival.model.wrapping import WrapCylinder
 
 __all__ = ["ArmBody", "ArmKinematics", "muscle_profile", "rotation_about"]
@@ -129,11 +131,34 @@ class ArmBody(ArmKinematics):
     """The meshed arm of a model file and mesh profile: geometry, kinematics, external loads."""
 
     def __init__(self, model_file: str | Path | None = None, profile: str = "quick"):
-        super().__init__(model_file)
-        self.profile = profile
-        self.spec.profile(profile)  # unknown profile -> clear error
+        self._set_frame(model_file, profile)
         self.mesh, self.muscle_cells, self.muscle_nodes = self._mesh()
         self.material = self._material()
+
+    def _set_frame(self, model_file: str | Path | None, profile: str) -> None:
+        """The model file, the joint's frame and the muscles' own surfaces read, repaired and
+        placed (docs/own_anatomy.md): every check of the model before any meshing."""
+        ArmKinematics.__init__(self, model_file)
+        self.model_file = None if model_file is None else str(model_file)  # None: the built-in model
+        self.profile = profile
+        self.spec.profile(profile)  # unknown profile -> clear error
+        self.surfaces = {m.name: place_muscle_surface(m, np.asarray(m.origin, dtype=float), self.body_end(m, m.mesh_angle_deg))
+                         for m in self.spec.ordered_muscles() if m.surface is not None}
+
+    @classmethod
+    def frame(cls, model_file: str | Path | None = None, profile: str = "quick") -> ArmBody:
+        """The model's kinematics and placed surfaces without a mesh (seconds): a command's check
+        of its --model before it writes anything."""
+        body = object.__new__(ArmBody)
+        body._set_frame(model_file, profile)
+        return body
+
+    def body_length(self, muscle: Muscle) -> float:
+        """Length (mm) the muscle's tissue layout is measured along: its centre line, or for a muscle
+        from a surface the centre line of its Laplace level sets (persival.model.laplace_fibres)."""
+        if muscle.surface is None:
+            return self.centre_line_length(muscle)
+        return float(self.mesh.cell_data["body_length"][self.muscle_cells[muscle.name][0]])
 
     # -- geometry -----------------------------------------------------------------------------
 
@@ -152,11 +177,23 @@ class ArmBody(ArmKinematics):
     def _build_mesh(self) -> Tet10Mesh:
         """gmsh: every muscle's swept solid, numbered one after the other (cell data "muscle")."""
         points, cells, node_sets, cell_data = [], [], {}, {"muscle": [], "fibre": [], "arclength": []}
+        if self.surfaces:  # phi of the Laplace fibres and the length the tissue layout is scaled to
+            cell_data.update(laplace=[], body_length=[])
         offset = 0
         for index, muscle in enumerate(self.spec.ordered_muscles()):
-            line = self.centre_line(muscle)
-            radius, _ = muscle_profile(muscle, np.linspace(0.0, 1.0, len(line)), self.centre_line_length(muscle))
-            mesh = swept_solid_mesh(line, radius, self.spec.mesh_size(self.profile, muscle.name))
+            size = self.spec.mesh_size(self.profile, muscle.name)
+            if muscle.name in self.surfaces:
+                own = surface_muscle(muscle, self.surfaces[muscle.name], size)
+                mesh, length = own.mesh, own.fibres.length
+            else:
+                line = self.centre_line(muscle)
+                length = self.centre_line_length(muscle)
+                radius, _ = muscle_profile(muscle, np.linspace(0.0, 1.0, len(line)), length)
+                mesh = swept_solid_mesh(line, radius, size)
+                mesh.cell_data["laplace"] = np.full(mesh.n_cells, np.nan)
+            if self.surfaces:
+                cell_data["laplace"].append(mesh.cell_data["laplace"])
+                cell_data["body_length"].append(np.full(mesh.n_cells, length))
             points.append(mesh.points)
             cells.append(mesh.cells + offset)
             node_sets[f"{muscle.name}/origin"] = mesh.node_sets["origin"] + offset
@@ -177,7 +214,7 @@ class ArmBody(ArmKinematics):
         gamma, k, pre = np.empty(n), np.empty(n), np.empty(n)
         for muscle in self.spec.ordered_muscles():
             cells = self.muscle_cells[muscle.name]
-            _, g = muscle_profile(muscle, self.mesh.cell_data["arclength"][cells], self.centre_line_length(muscle))
+            _, g = muscle_profile(muscle, self.mesh.cell_data["arclength"][cells], self.body_length(muscle))
             gamma[cells] = g
             k[cells] = g * muscle.bulk_modulus[0] + (1.0 - g) * muscle.bulk_modulus[1]
             pre[cells] = muscle.fibre_prestretch

@@ -4,7 +4,9 @@ The model is data: bones, the elbow hinge, the forearm's weight, passive joint l
 five muscles (geometry, tissue layout, fibre prestretch, bulk moduli) and mesh profiles.
 Coordinates in mm. Upper-arm points are in the fixed humerus frame; forearm points are given
 in the forearm frame at theta = 0 (full extension, forearm hanging along -z) and rotate about
-the hinge axis with the elbow angle (flexion positive).
+the hinge axis with the elbow angle (flexion positive). A muscle may take its shape from a surface
+file (SPEC 3.4, persival.model.surface_import); its path is resolved against the model file's
+folder and its content is part of the model's hash.
 """
 
 from __future__ import annotations
@@ -143,6 +145,13 @@ class Muscle(_Strict):
     transition_length: float = Field(gt=0, description="muscle-tendon blend zone (mm)")
     fibre_prestretch: float = Field(1.0, gt=0.5, lt=2.0)
     bulk_modulus: tuple[float, float] = Field((100.0, 1000.0), description="muscle, tendon (MPa)")
+    # Own anatomy (SPEC 3.4, docs/own_anatomy.md): the muscle's shape from a closed surface
+    # instead of the swept solid; belly_radius and bow then play no part.
+    surface: str | None = Field(None, description="surface file (STL, OBJ, PLY, VTK, VTP), relative to the model file")
+    surface_units: Literal["mm", "cm", "m"] = "mm"
+    origin_point: Vector | None = Field(None, description="near the origin end, in the surface's coordinates")
+    insertion_point: Vector | None = Field(None, description="near the insertion end, in the surface's coordinates")
+    scale_to_fit: bool = Field(False, description="uniform scale so the two points span origin to insertion")
 
     @field_validator("tendon_radius", "tendon_length", "bulk_modulus")
     @classmethod
@@ -160,6 +169,16 @@ class Muscle(_Strict):
         if self.insertion_tie == "forearm" and self.wrap_radius > 0:
             raise ValueError(f"muscle {self.name!r}: a forearm-tied insertion face rides the forearm, not a wrapped "
                              "path's end (drop wrap_radius or use insertion_tie = \"line\")")
+        return self
+
+    @model_validator(mode="after")
+    def _surface_keys_complete(self):
+        surface_keys = {"surface_units", "origin_point", "insertion_point", "scale_to_fit"} & self.model_fields_set
+        if self.surface is None and surface_keys:
+            raise ValueError(f"muscle {self.name!r}: {', '.join(sorted(surface_keys))} given without a surface")
+        if self.surface is not None and (self.origin_point is None or self.insertion_point is None):
+            raise ValueError(f"muscle {self.name!r}: a surface needs origin_point and insertion_point (in the surface's "
+                             "coordinates, near its two ends)")
         return self
 
     @model_validator(mode="after")
@@ -274,9 +293,20 @@ def _distance_to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
 PHYSICS_VERSION = 2
 
 
-def model_hash(text: str) -> str:
-    """sha256 of the model file's text and the physics version (provenance key of every store)."""
-    return hashlib.sha256(f"persival-physics-{PHYSICS_VERSION}\n{text}".encode()).hexdigest()
+# Bumped whenever the code that turns a surface file into a mesh (repair, placement, meshing,
+# Laplace fibres) changes what it gives, for the same reason as PHYSICS_VERSION.
+SURFACE_VERSION = 2  # 2: the Laplace centre line smoothed
+
+
+def model_hash(text: str, surfaces: dict[str, bytes] | None = None) -> str:
+    """sha256 of the model file's text and the physics version (provenance key of every store),
+    and of the muscles' surface files where it has any (their content, not their names)."""
+    digest = hashlib.sha256(f"persival-physics-{PHYSICS_VERSION}\n{text}".encode()).hexdigest()
+    if not surfaces:
+        return digest  # the built-in model's hash is the same as before surfaces existed
+    lines = [digest, f"persival-surfaces-{SURFACE_VERSION}"]
+    lines += [f"{name} {hashlib.sha256(data).hexdigest()}" for name, data in sorted(surfaces.items())]
+    return hashlib.sha256("\n".join(lines).encode()).hexdigest()
 
 
 def load_model_file(path: str | Path | None = None) -> tuple[ArmModelFile, str]:
@@ -298,4 +328,22 @@ def load_model_file(path: str | Path | None = None) -> tuple[ArmModelFile, str]:
     except ValidationError as exc:
         lines = [f"{'.'.join(str(p) for p in e['loc']) or '<file>'}: {e['msg']}" for e in exc.errors()]
         raise ModelFileError(f"{path}: invalid model file:\n  " + "\n  ".join(lines)) from None
-    return model, model_hash(text)
+    model, surfaces = _resolve_surfaces(model, path)
+    return model, model_hash(text, surfaces)
+
+
+def _resolve_surfaces(model: ArmModelFile, path: Path) -> tuple[ArmModelFile, dict[str, bytes]]:
+    """The model with every muscle's surface as an absolute path (it is relative to the model
+    file), and each surface file's bytes (part of the model's hash: a changed surface is a new model)."""
+    muscles, surfaces = [], {}
+    for muscle in model.muscles:
+        if muscle.surface is not None:
+            surface = (path.parent / muscle.surface).resolve()
+            try:
+                surfaces[muscle.name] = surface.read_bytes()
+            except OSError as exc:
+                raise ModelFileError(f"{path}: muscle {muscle.name!r}: cannot read its surface {surface}: "
+                                     f"{(exc.strerror or str(exc)).lower()}") from None
+            muscle = muscle.model_copy(update={"surface": str(surface)})
+        muscles.append(muscle)
+    return (model.model_copy(update={"muscles": muscles}) if surfaces else model), surfaces

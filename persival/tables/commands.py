@@ -48,14 +48,14 @@ def register(app: typer.Typer) -> None:
         from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 
         from persival.log_progress import progress_bar
-        from persival.model.arm_file import load_model_file
+        from persival.model.arm_body import ArmBody
         from persival.tables.moment_table import TableMismatchError, check_grids
         from persival.tables.open import ensure_tables
 
         console = Console()
         with user_errors(TableMismatchError):
             grid = check_grids(parse_grid(angles, "--angles"), parse_grid(levels, "--levels"))
-            load_model_file(model)[0].profile(profile)
+            ArmBody.frame(model, profile)  # the model file, its profile and its own surfaces
             if moments_out is not None and moments_out.suffix != ".npz":
                 raise ValueError(f"--moments-out must name a .npz file, got {moments_out}")
             if out is not None and out.exists() and not (out / "header.json").is_file() and \
@@ -94,14 +94,13 @@ def register(app: typer.Typer) -> None:
         """Solve the FE arm for one activation vector (or hold it at --angle); write state.json and VTU files."""
         from rich.console import Console
 
-        from persival.model.arm_file import load_model_file
+        from persival.model.arm_body import ArmBody
         from persival.vocabulary import check_activation_vector
 
         console = Console()
         with user_errors():  # every input is checked before the meshing and solve
             alpha = check_activation_vector(parse_activations(activations)).tolist()
-            spec = load_model_file(model)[0]
-            spec.profile(profile)
+            spec = ArmBody.frame(model, profile).spec  # the model file, its profile and its own surfaces
             lower, upper = spec.joint.limits_deg
             if angle is not None and not lower <= angle <= upper:
                 raise ValueError(f"--angle must lie within the joint limits [{lower:g}, {upper:g}] deg, got {angle:g}")

@@ -15,14 +15,15 @@ def open_tables(arm: ArmModel, tables: str | None = None):
     from persival.tables.response_table import ResponseTable, default_table_dir
 
     root = tables or default_table_dir(arm)
+    command = f"persival tables --profile {arm.profile}" + (f" --model {arm.model_file}" if arm.model_file else "")
     try:
         table = ResponseTable.open(root, arm.model_hash, arm.profile, mesh_fingerprint(arm.mesh))
     except FileNotFoundError:
         raise FileNotFoundError(f"no response table of this model at {root}: build it with "
-                                f"`persival tables --profile {arm.profile}` (or use --option method=direct)") from None
+                                f"`{command}` (or use --option method=direct)") from None
     if not table.complete:
         raise ValueError(f"the response table at {root} is unfinished ({int(table.done.sum())} of {table.done.size} "
-                         f"columns): finish it with `persival tables --profile {arm.profile}`")
+                         f"columns): finish it with `{command}`")
     return table
 
 
