@@ -110,7 +110,9 @@ def _progress_bar(description: str):
     task = bar.add_task(description, total=None, info="")
 
     def advance(done, total, *info):
-        text = f"val loss {info[0]:.4g}, MAE {', '.join(f'{v:.3f}' for v in info[1])} mm" if len(info) == 2 else ""
+        # training: (val loss, MAE per coordinate, "fold f/F epoch e/E"); other stages: nothing
+        text = (f"{info[2]}, val loss {info[0]:.4g}, MAE {', '.join(f'{v:.3f}' for v in info[1])} mm"
+                if len(info) == 3 else "")
         bar.update(task, completed=done if done > 1 or total is None else bar.tasks[0].completed + done,
                    total=total, info=text)
 

@@ -106,8 +106,17 @@ def _validate(net, x, y, u, chunk: int = 128) -> tuple[float, list[float]]:
     return loss, [float(v) for v in mae]
 
 
+def epoch_label(fold: int, folds: int, epoch: int, epochs: int) -> str:
+    """"fold 2/5 epoch 12/100" (fold counted from 1): epochs restart every fold, so a running count
+    over all folds ("epoch 202/500") would read like a blow-up when the validation loss jumps back."""
+    return f"fold {fold + 1}/{folds} epoch {epoch}/{epochs}"
+
+
 def train(dataset, config: TrainingConfig, out: str | Path, progress=None):
-    """Train on ``dataset`` (its displacements and elbow angles); returns (best net, history)."""
+    """Train on ``dataset`` (its displacements and elbow angles); returns (best net, history).
+
+    ``progress(done, total, val_loss, mae_xyz, where)`` after every epoch: ``done`` of ``total``
+    epochs over all folds (for a progress bar), ``where`` = :func:`epoch_label`."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
@@ -155,7 +164,8 @@ def train(dataset, config: TrainingConfig, out: str | Path, progress=None):
                          generator=generator.get_state(), wall_time_s=state["wall_time_s"] + time.perf_counter() - t0)
             _save_atomic(state, checkpoint)
             if progress is not None:
-                progress(state["fold"] * config.epochs + state["epoch"], total_epochs, val_loss, mae)
+                progress(state["fold"] * config.epochs + state["epoch"], total_epochs, val_loss, mae,
+                         epoch_label(state["fold"], len(folds), state["epoch"], config.epochs))
         state.update(fold=state["fold"] + 1, epoch=0, net=None, optimizer=None, schedule=None)
         _save_atomic(state, checkpoint)
     best = copy.deepcopy(template)
