@@ -42,9 +42,9 @@ def _register() -> None:
     run_command.register(app)
     campaign_commands.register(app, bench_app)
     tables_commands.register(app)
-    surrogate_commands.register(app, bench_app)
+    motion_app = surrogate_commands.register(app, bench_app)
     evaluate_commands.register(app, bench_app)
-    deploy_commands.register(app, bench_app)
+    deploy_commands.register(app, bench_app, motion_app)
 
 
 _register()
