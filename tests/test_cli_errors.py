@@ -143,6 +143,9 @@ CASES = [
     ("motion play", ["--input", "far.csv", "--out", "afile", "--artifacts", "export"], "file where a folder is expected",
      "is a file, not a folder"),
     ("motion play", ["--input", "far.csv", "--out", "new", "--artifacts", "export", "--load", "-1"], "negative load", BOX),
+    ("bench viewer", ["--artifacts", "folder"], "not an export folder", "metadata.json: missing"),
+    ("bench viewer", ["--artifacts", "export", "--json", "folder"], "folder where a file is expected",
+     "is a folder, not a file"),
 ]
 
 

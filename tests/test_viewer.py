@@ -204,3 +204,25 @@ def test_session_recording_plays_with_live_graphs(session_run, motion_export):
     print(f"\nrecording: {rec['frames']} frames in {opened['duration']:.1f} s, {rec['statesDrawn']} states drawn, "
           f"{rec['graphUpdates']} graph updates, {rec['fpsDuring']:.0f} fps; achieved vs target max "
           f"{rec['maxAngleErrorDeg']:.2f} deg (the model chain's own error {chain:.2f} deg)")
+
+
+def test_bench_viewer_command(export_dir, tmp_path):  # noqa: F811
+    """`persival bench viewer`: both phases measured on the small run's export, the JSON written."""
+    from typer.testing import CliRunner
+
+    from persival.cli import app
+
+    out = tmp_path / "bench.json"
+    result = CliRunner().invoke(app, ["bench", "viewer", "--artifacts", str(export_dir), "--seconds", "2",
+                                      "--no-trace", "--json", str(out)])
+    assert result.exit_code == 0, result.output
+    bench = json.loads(out.read_text())
+    assert [p["phase"] for p in bench["phases"]] == ["shipped (adaptive)", "full resolution"]
+    shipped, full = bench["phases"]
+    assert bench["consoleErrors"] == [] and bench["width"] == 1280 and bench["height"] == 800
+    assert shipped["viewAlongHinge"] > 0.999 and full["renderScale"] == 1.0
+    # the angle changes every frame: (nearly) every frame draws a new state
+    assert shipped["frames"] > 20 and shipped["states"] >= 0.8 * shipped["frames"]
+    assert 0 < shipped["cpuMsPerFrame"] < 1000 and shipped["fps"] > 5
+    print(f"\nbench viewer: {shipped['fps']:.0f} fps shipped (scale {shipped['renderScale']:.2f}), {full['fps']:.0f} fps at "
+          f"full resolution; {shipped['cpuMsPerFrame']:.1f} / {full['cpuMsPerFrame']:.1f} CPU ms per frame")

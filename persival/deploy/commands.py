@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ipaddress
+import json
 from pathlib import Path
 
 import typer
@@ -112,6 +113,7 @@ def register(app: typer.Typer, bench_app: typer.Typer, motion_app: typer.Typer |
     _register_serve(app)
     if motion_app is not None:
         _register_motion_play(motion_app)
+    _register_bench_viewer(bench_app)
 
     @bench_app.command("serve")
     def bench_serve(
@@ -150,3 +152,44 @@ def register(app: typer.Typer, bench_app: typer.Typer, motion_app: typer.Typer |
             json_out.write_text(json.dumps(summary, indent=2))
         if summary["errors"]:
             raise typer.Exit(1)
+
+
+def _register_bench_viewer(bench_app: typer.Typer) -> None:
+    @bench_app.command("viewer")
+    def bench_viewer(
+        artifacts: Path = typer.Option(Path("results/export"), "--artifacts", help="Export folder to view."),
+        seconds: float = typer.Option(8.0, "--seconds", min=1.0, max=60.0, help="Measured seconds per phase."),
+        width: int = typer.Option(1280, "--width", min=320, max=3840, help="Window width, px."),
+        height: int = typer.Option(800, "--height", min=240, max=2160, help="Window height, px."),
+        trace: bool = typer.Option(True, "--trace/--no-trace", help="Record a Chrome trace of the shipped phase."),
+        json_out: Path = typer.Option(None, "--json", help="Also write the result to this file."),
+    ) -> None:
+        """Frame rate of the web viewer in headless Chromium (software GL) while the arm moves every
+        frame, with the frame's profile (the page's own timings and a Chrome trace per thread)."""
+        from rich.console import Console
+        from rich.table import Table
+
+        from persival.cli_errors import check_output_file, user_errors
+        from persival.deploy.artifacts import ArtifactError
+        from persival.deploy.bench_viewer import ViewerBenchError, run_viewer_bench
+
+        with user_errors(ArtifactError, ViewerBenchError):
+            if json_out is not None:
+                check_output_file(json_out, "--json")
+            result = run_viewer_bench(artifacts, seconds, width, height, trace)
+        console = Console()
+        table = Table(title=f"viewer, headless Chromium {result.get('chromium', '')}, software GL, {width} x {height}, "
+                            f"{result['export']['n_nodes']} nodes; load average {result['machine']['load_average'][0]:.1f}")
+        for col in ("phase", "fps", "CPU ms / frame", "render scale", "JS ms / state", "JS ms / frame"):
+            table.add_column(col, justify="left" if col == "phase" else "right")
+        for p in result["phases"]:
+            js_state = sum(p["perState"].values())
+            table.add_row(p["phase"], f"{p['fps']:.1f}", f"{p['cpuMsPerFrame']:.1f}", f"{p['renderScale']:.2f}",
+                          f"{js_state:.2f}", f"{p['perFrame']['tickMs']:.2f}")
+        console.print(table)
+        for t in result["phases"][0].get("trace", []):
+            top = "; ".join(f"{e['name']} {e['msPerFrame']:.2f}" for e in t["top"][:3])
+            console.print(f"  {t['thread']}: busy {t['busyMsPerFrame']:.2f} ms/frame ({top})", markup=False)
+        if json_out is not None:
+            json_out.write_text(json.dumps(result, indent=1))
+            console.print(f"wrote {json_out}")

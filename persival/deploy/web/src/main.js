@@ -43,6 +43,7 @@ class Viewer {
     this.mode = 'auto'; this.place = 'wasm'; this.tier = 'float32';
     this.playDrawn = new Float32Array(5); this.playEffort = new Float32Array(5);
     this.frames = []; this.fps = 0; this.inferenceMs = NaN; this.states = 0; this.monitor = new Monitor();
+    this.resetProfile();
     this.holdable = this.hasMotion && this.hasAngleModel ? await Holdable.build(this.local, this.meta, this.range) : null;
     this.graphs = new Graphs(document.getElementById('graphs'), this.meta.muscles);
     this.player = new RecordingPlayer(this);
@@ -232,23 +233,50 @@ class Viewer {
     return { drawn: s.activations, effort: s.activations };
   }
 
+  // Where a frame's time goes, measured on this thread (performance.now): per state the lookup of
+  // its activations, the inference and the buffer work (colours, normals); per frame the whole
+  // tick and, inside it, the draw call submission. The rasterising itself runs in the GPU
+  // process (SwiftShader in a software setup) and shows in a Chrome trace, not here.
+  resetProfile() {
+    this.prof = { frames: 0, states: 0, tickMs: 0, renderMs: 0, activationsMs: 0, inferenceMs: 0, buffersMs: 0, t0: performance.now() };
+  }
+
+  profile() {
+    const p = this.prof, f = Math.max(p.frames, 1), s = Math.max(p.states, 1), wall = performance.now() - p.t0;
+    return { frames: p.frames, states: p.states, wallMs: wall, fps: (1000 * p.frames) / wall,
+      perFrame: { tickMs: p.tickMs / f, renderSubmitMs: p.renderMs / f },
+      perState: { activationsMs: p.activationsMs / s, inferenceMs: p.inferenceMs / s, buffersMs: p.buffersMs / s },
+      nodes: this.meta.n_nodes, triangles: this.meta.triangles.length, renderScale: this.scene.renderScale };
+  }
+
   async infer() {
     const serial = this.serial;
+    const ta = performance.now();
     const next = await this.activationsForState();
     const t0 = performance.now();
     const r = await (this.place === 'wasm' ? this.local : this.server).deform(next.drawn, this.tier);
     const ms = performance.now() - t0;
+    this.prof.activationsMs += t0 - ta;
+    this.prof.inferenceMs += ms;
     this.inferenceMs = Number.isFinite(this.inferenceMs) ? 0.8 * this.inferenceMs + 0.2 * ms : ms;
     this.effort.set(next.effort);
     if (this.state.driver !== 'activations' || this.player.playing) this.state.activations.set(next.effort);
+    const tb = performance.now();
     this.scene.setPositions(r.positions);
+    this.prof.buffersMs += performance.now() - tb;
+    this.prof.states++;
     const angle = Number.isFinite(r.angle) ? r.angle : 0; // NaN: the export has no angle output
     this.scene.setElbowAngle(angle);
     this.elbowAngle = angle;
     if (next.k !== undefined) this.player.record(next.k, angle, next.target);
     this.states++;
     this.applied = serial;
-    this.controls.show(this.effort, angle);
+    // the panel's numbers at most every 100 ms: each change is a layout, paint and raster of the panel
+    const now = performance.now();
+    if (!(this.playing || this.player.playing) || now - (this.shownAt || 0) > 100) {
+      this.shownAt = now;
+      this.controls.show(this.effort, angle);
+    }
     if (this.mode === 'auto' && this.monitor.add(ms)) {
       const m = this.measured.find((x) => x.place === this.place && x.tier === this.tier);
       if (m) m.ms = this.monitor.ema;
@@ -257,6 +285,7 @@ class Viewer {
   }
 
   tick(now) {
+    const tickStart = performance.now();
     this.frames.push(now);
     while (this.frames.length && now - this.frames[0] > 1000) this.frames.shift();
     if (this.frames.length > 1) this.fps = ((this.frames.length - 1) * 1000) / (now - this.frames[0]);
@@ -266,10 +295,14 @@ class Viewer {
       this.infer().catch((e) => { ui.status(String(e.message || e), true); this.fail(e); })
         .finally(() => { this.busy = false; });
     }
+    const tr = performance.now();
     this.scene.render();
+    this.prof.renderMs += performance.now() - tr;
     this.waiters = this.waiters.filter((w) => (this.applied >= w.serial && !this.busy ? (w.resolve(), false) : true));
     if ((this.hudAt || 0) < now - 250) { this.hudAt = now; this.hud(this.stats()); this.controls.showLoad(); }
     if ((this.scaleAt || 0) < now - 500 && this.frames.length > 10) { this.scaleAt = now; this.scene.adaptResolution(this.fps); }
+    this.prof.frames++;
+    this.prof.tickMs += performance.now() - tickStart;
   }
 
   fail(e) {
@@ -305,4 +338,5 @@ window.persival = {
   setBackend: (mode, tier) => { viewer.setMode(mode, tier); return viewer.rendered(); },
   play: (on) => viewer.controls.play(on),
   stats: () => viewer.stats(),
+  profile: (reset = false) => { const p = viewer.profile(); if (reset) viewer.resetProfile(); return p; },
 };

@@ -26,7 +26,10 @@ function lights(scene, camera) {
 
 export class ArmScene {
   constructor(canvas, meta) {
-    this.renderer = new THREE.WebGLRenderer({ canvas, antialias: new URLSearchParams(location.search).get('aa') === '1', alpha: true, preserveDrawingBuffer: true });
+    // Opaque, not preserved: the compositor neither blends the canvas over the page nor copies its
+    // buffer every frame (docs/viewer.md, "Frame rate"). Antialiasing on request (?aa=1).
+    this.renderer = new THREE.WebGLRenderer({ canvas, antialias: new URLSearchParams(location.search).get('aa') === '1',
+      alpha: false, preserveDrawingBuffer: false });
     this.maxScale = Math.min(window.devicePixelRatio, 2);
     this.renderScale = this.maxScale;
     this.renderer.setPixelRatio(this.renderScale);
@@ -51,7 +54,7 @@ export class ArmScene {
   }
 
   addBones(skeleton) {
-    const material = new THREE.MeshPhongMaterial({ color: 0xd8cdb4, shininess: 18, specular: 0x2a2a2a });
+    const material = new THREE.MeshLambertMaterial({ color: 0xd8cdb4 });
     const { centre, axis } = skeleton.hinge;
     this.hingeAxis = new THREE.Vector3(...axis).normalize();
     // centre + R (p - centre): the group sits at the centre, its children are shifted by -centre.
@@ -83,7 +86,8 @@ export class ArmScene {
     g.setIndex(new THREE.BufferAttribute(index, 1));
     this.buffers.computeNormals();
     g.computeBoundingSphere();
-    const material = new THREE.MeshPhongMaterial({ vertexColors: true, shininess: 40, specular: 0x333333 });
+    // Lambert: diffuse light only; Phong's highlights cost a fifth of a software renderer's frame at full resolution
+    const material = new THREE.MeshLambertMaterial({ vertexColors: true });
     this.muscles = new THREE.Mesh(g, material);
     this.muscles.frustumCulled = false; // positions change every frame; no bounding-sphere refresh
     this.root.add(this.muscles);
@@ -141,9 +145,10 @@ export class ArmScene {
       const q = p.clone().sub(this.centre);
       w = Math.max(w, Math.abs(q.dot(right))); h = Math.max(h, Math.abs(q.dot(up))); d = Math.max(d, q.dot(dir));
     }
-    // the control panel covers the left of the window, the graphs (while shown) its bottom
+    // the control panel may cover the left of the canvas (narrow windows), the graphs its bottom
     const free = 1 - (this.bottomInset || 0) / window.innerHeight;
-    const aspect = Math.max(this.camera.aspect * 0.78, 0.5);
+    const c = this.renderer.domElement, underPanel = c.offsetLeft < 100 && c.clientWidth > 720;
+    const aspect = underPanel ? Math.max(this.camera.aspect * 0.78, 0.5) : this.camera.aspect;
     const dist = 1.1 * Math.max(h / (t * free), w / (t * aspect)) + d;
     this.camera.position.copy(this.centre).addScaledVector(dir, dist);
     this.camera.up.copy(up);
@@ -182,6 +187,7 @@ export class ArmScene {
   // Dynamic resolution: the drawing buffer shrinks (down to half) while the frame rate is below
   // target and grows back when there is headroom; software renderers are fill-rate bound.
   adaptResolution(fps, target = 60) {
+    if (this.fixedScale) return;
     let next = this.renderScale;
     if (fps < target) next = Math.max(0.5 * this.maxScale, this.renderScale * 0.85);
     else if (fps > 1.6 * target) next = Math.min(this.maxScale, this.renderScale * 1.1);
@@ -192,13 +198,19 @@ export class ArmScene {
     }
   }
 
+  // Hold the render scale (benchmarks: the cost of full resolution); null lets it adapt again.
+  fixScale(scale) {
+    this.fixedScale = scale;
+    if (scale) { this.renderScale = scale; this.renderer.setPixelRatio(scale); this.resize(); }
+  }
+
   resize() {
-    const w = window.innerWidth, h = window.innerHeight;
+    const c = this.renderer.domElement, w = c.clientWidth || window.innerWidth, h = c.clientHeight || window.innerHeight;
     this.renderer.setSize(w, h, false);
     this.camera.aspect = w / h;
     // Centre the arm in the part of the window the control panel (left) and the graphs (bottom,
     // while a recording is open) leave free.
-    const panel = w > 720 ? 150 : 0, below = (this.bottomInset || 0) / 2;
+    const panel = w > 720 && c.offsetLeft < 100 ? 150 : 0, below = (this.bottomInset || 0) / 2;
     if (this.viewDirection && below !== this.placedBelow) { this.placedBelow = below; this.placeCamera(); }
     if ((panel || below) && !this.renderer.xr.isPresenting) this.camera.setViewOffset(w, h, -panel, below, w, h);
     else this.camera.clearViewOffset();
