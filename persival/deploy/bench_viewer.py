@@ -43,7 +43,7 @@ def _check_tools() -> None:
 
 
 def run_viewer_bench(artifacts: str | Path, seconds: float = 8.0, width: int = 1280, height: int = 800,
-                     trace: bool = True, warmup: float = 3.0) -> dict:
+                     trace: bool = True, warmup: float = 3.0, screenshot: str | Path | None = None) -> dict:
     """Serve the export, drive the page, return the browser script's result (see the module doc)."""
     from persival.deploy.artifacts import DeployedModel
 
@@ -55,7 +55,7 @@ def run_viewer_bench(artifacts: str | Path, seconds: float = 8.0, width: int = 1
     except LoadTestError as exc:
         raise ViewerBenchError(str(exc)) from None
     options = {"url": f"http://127.0.0.1:{port}/", "seconds": seconds, "width": width, "height": height,
-               "trace": trace, "warmup": warmup}
+               "trace": trace, "warmup": warmup, "screenshot": str(Path(screenshot).resolve()) if screenshot else None}
     try:
         proc = subprocess.run(["node", str(_SCRIPT), json.dumps(options)], capture_output=True, text=True,
                               timeout=120 + 3 * (seconds + warmup), cwd=_SCRIPT.parent)

@@ -163,6 +163,8 @@ def _register_bench_viewer(bench_app: typer.Typer) -> None:
         height: int = typer.Option(800, "--height", min=240, max=2160, help="Window height, px."),
         trace: bool = typer.Option(True, "--trace/--no-trace", help="Record a Chrome trace of the shipped phase."),
         json_out: Path = typer.Option(None, "--json", help="Also write the result to this file."),
+        screenshot: Path = typer.Option(None, "--screenshot", help="Also save the default view as a PNG (the report "
+                                        "shows RUN/evaluate/viewer.png)."),
     ) -> None:
         """Frame rate of the web viewer in headless Chromium (software GL) while the arm moves every
         frame, with the frame's profile (the page's own timings and a Chrome trace per thread)."""
@@ -174,9 +176,10 @@ def _register_bench_viewer(bench_app: typer.Typer) -> None:
         from persival.deploy.bench_viewer import ViewerBenchError, run_viewer_bench
 
         with user_errors(ArtifactError, ViewerBenchError):
-            if json_out is not None:
-                check_output_file(json_out, "--json")
-            result = run_viewer_bench(artifacts, seconds, width, height, trace)
+            for path, what in ((json_out, "--json"), (screenshot, "--screenshot")):
+                if path is not None:
+                    check_output_file(path, what)
+            result = run_viewer_bench(artifacts, seconds, width, height, trace, screenshot=screenshot)
         console = Console()
         table = Table(title=f"viewer, headless Chromium {result.get('chromium', '')}, software GL, {width} x {height}, "
                             f"{result['export']['n_nodes']} nodes; load average {result['machine']['load_average'][0]:.1f}")
@@ -191,5 +194,8 @@ def _register_bench_viewer(bench_app: typer.Typer) -> None:
             top = "; ".join(f"{e['name']} {e['msPerFrame']:.2f}" for e in t["top"][:3])
             console.print(f"  {t['thread']}: busy {t['busyMsPerFrame']:.2f} ms/frame ({top})", markup=False)
         if json_out is not None:
+            json_out.parent.mkdir(parents=True, exist_ok=True)
             json_out.write_text(json.dumps(result, indent=1))
             console.print(f"wrote {json_out}")
+        if screenshot is not None:
+            console.print(f"wrote {screenshot}")

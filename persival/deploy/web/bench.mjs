@@ -105,6 +105,10 @@ try {
   await page.goto(opts.url, { waitUntil: 'load' });
   await page.evaluate(() => window.persival.ready);
   result.chromium = browser.version();
+  if (opts.screenshot) { // the default view, as a user first sees it (for the report)
+    await page.waitForTimeout(1000);
+    await page.screenshot({ path: opts.screenshot });
+  }
   await page.evaluate(() => window.persival.play(true)); // the angle changes every frame from here on
   result.phases.push(await phase(page, browser, 'shipped (adaptive)', opts.trace));
   await page.evaluate(() => window.persival.viewer.scene.fixScale(1));
