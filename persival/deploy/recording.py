@@ -16,10 +16,11 @@ regression (sigma 25 ms, or the median sample interval where that is longer; win
 evaluated on a uniform 100 Hz grid resamples and smooths in one step, for any input rate, with
 no lag; inside the recording its gain is exp(-(2 pi f sigma)^2 / 2), -3 dB at 5.3 Hz; within
 about 2 sigma of either end the fitted line leans on one side, which biases the velocity and
-acceleration there (a cosine starting at rest: 2.6 deg/s and half the acceleration at t = 0). Frames
-outside the model's reachable range are counted, the raw samples clamped to it and smoothed
-again; velocity and acceleration are central differences of the smoothed angle (second-order
-one-sided ones at the ends).
+acceleration there (a cosine starting at rest: 2.6 deg/s and half the acceleration at t = 0). Velocity
+and acceleration are central differences of the smoothed angle (second-order one-sided ones at
+the ends); frames outside the model's reachable range are counted and their angle clamped to it
+(their velocity and acceleration stay the recording's: one that enters the range moving keeps
+its speed instead of a corner).
 The viewer (persival/deploy/web/src/recording.js) does the same in the browser.
 """
 
@@ -178,10 +179,12 @@ def prepare(recording: Recording, range_deg: tuple[float, float], load_kg: float
         raise ValueError(f"{recording.source.get('file')}: no frame lies inside the model's reachable range "
                          f"{lo:.1f} to {hi:.1f} deg (the recording's {recording.column} spans {angle.min():.1f} "
                          f"to {angle.max():.1f} deg)")
-    target = np.clip(_local_linear(t, np.clip(angle, lo, hi), grid, sigma), lo, hi)
+    # velocity and acceleration from the recording itself, not from the clamped angle: a
+    # recording that enters the range moving must not show a corner (a spike of acceleration)
     dt, order = 1.0 / rate_hz, 2 if len(grid) >= 3 else 1  # second order at the ends too
-    velocity = np.gradient(target, dt, edge_order=order) if len(grid) > 1 else np.zeros(1)
+    velocity = np.gradient(smooth, dt, edge_order=order) if len(grid) > 1 else np.zeros(1)
     acceleration = np.gradient(velocity, dt, edge_order=order) if len(grid) > 1 else np.zeros(1)
+    target = np.clip(smooth, lo, hi)
     if load_kg is not None:
         load = np.full(len(grid), float(load_kg))
     elif recording.load_kg is not None:

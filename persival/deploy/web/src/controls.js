@@ -116,6 +116,6 @@ async function setupAR(v) {
     // dom-overlay: the panel and the live graphs stay on screen over the camera image
     const session = await xr.requestSession('immersive-ar', { optionalFeatures: ['local-floor', 'dom-overlay'],
       domOverlay: { root: document.body } });
-    v.scene.enterAR(session);
+    v.scene.enterAR(session, v.graphs.rec ? v.graphs.canvas : null);
   });
 }

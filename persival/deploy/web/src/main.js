@@ -295,12 +295,14 @@ class Viewer {
       this.infer().catch((e) => { ui.status(String(e.message || e), true); this.fail(e); })
         .finally(() => { this.busy = false; });
     }
+    // a new resolution before drawing: resizing clears the canvas, and a frame drawn before the
+    // resize would be shown blank
+    if ((this.scaleAt || 0) < now - 500 && this.frames.length > 10) { this.scaleAt = now; this.scene.adaptResolution(this.fps); }
     const tr = performance.now();
     this.scene.render();
     this.prof.renderMs += performance.now() - tr;
     this.waiters = this.waiters.filter((w) => (this.applied >= w.serial && !this.busy ? (w.resolve(), false) : true));
     if ((this.hudAt || 0) < now - 250) { this.hudAt = now; this.hud(this.stats()); this.controls.showLoad(); }
-    if ((this.scaleAt || 0) < now - 500 && this.frames.length > 10) { this.scaleAt = now; this.scene.adaptResolution(this.fps); }
     this.prof.frames++;
     this.prof.tickMs += performance.now() - tickStart;
   }

@@ -80,6 +80,7 @@ export class RecordingPlayer {
     this.maxError = Math.max(this.maxError, Math.abs(angle - target));
     this.errors++;
     this.v.graphs.update(k);
+    this.v.scene.refreshGraphPanel();
   }
 
   summary() {

@@ -116,10 +116,11 @@ export function prepareRecording(rec, [lo, hi], loadKg = null) {
     throw new Error(`${rec.file}: no frame lies inside the model's reachable range ${lo.toFixed(1)} to ${hi.toFixed(1)} deg ` +
       `(the recording's ${rec.column} spans ${min.toFixed(1)} to ${max.toFixed(1)} deg)`);
   }
-  const target = localLinear(t, rec.angle.map((v) => Math.min(hi, Math.max(lo, v))), grid, sigma)
-    .map((v) => Math.min(hi, Math.max(lo, v)));
-  const velocity = gradient(target, 1 / RATE_HZ);
+  // velocity and acceleration from the recording itself, not from the clamped angle (no corner
+  // where a recording enters the range moving)
+  const velocity = gradient(smooth, 1 / RATE_HZ);
   const acceleration = gradient(velocity, 1 / RATE_HZ);
+  const target = smooth.map((v) => Math.min(hi, Math.max(lo, v)));
   let load;
   if (loadKg !== null && loadKg !== undefined) load = new Float64Array(n).fill(loadKg);
   else if (rec.load) load = grid.map((g) => interp(g, t, rec.load));

@@ -166,8 +166,24 @@ export class ArmScene {
     for (const a of Object.values(this.attr)) a.needsUpdate = true;
   }
 
-  async enterAR(session) {
+  // In AR the recording's graphs follow as a panel below the arm (a texture of the graphs'
+  // canvas, refreshed when they grow), for headsets without the DOM overlay.
+  addGraphPanel(canvas) {
+    const texture = new THREE.CanvasTexture(canvas);
+    const width = 0.5, height = (width * canvas.height) / Math.max(canvas.width, 1);
+    const panel = new THREE.Mesh(new THREE.PlaneGeometry(width, height),
+      new THREE.MeshBasicMaterial({ map: texture, transparent: true, opacity: 0.92 }));
+    panel.position.set(0, -0.25 - height / 2, -0.6);
+    this.scene.add(panel);
+    this.graphPanel = { panel, texture };
+    return panel;
+  }
+
+  refreshGraphPanel() { if (this.graphPanel) this.graphPanel.texture.needsUpdate = true; }
+
+  async enterAR(session, graphCanvas = null) {
     const r = this.renderer, root = this.root, background = this.scene.background;
+    const panel = graphCanvas && graphCanvas.width > 0 ? this.addGraphPanel(graphCanvas) : null;
     const saved = { position: root.position.clone(), scale: root.scale.clone() };
     r.xr.enabled = true;
     r.xr.setReferenceSpaceType('local');
@@ -181,6 +197,7 @@ export class ArmScene {
       this.scene.background = background;
       root.position.copy(saved.position);
       root.scale.copy(saved.scale);
+      if (panel) { this.scene.remove(panel); this.graphPanel = null; }
     });
   }
 
