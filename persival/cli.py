@@ -44,9 +44,9 @@ def _register() -> None:
     model_commands.register(app)
     campaign_commands.register(app, bench_app)
     tables_commands.register(app)
-    surrogate_commands.register(app, bench_app)
+    motion_app = surrogate_commands.register(app, bench_app)
     evaluate_commands.register(app, bench_app)
-    deploy_commands.register(app, bench_app)
+    deploy_commands.register(app, bench_app, motion_app)
 
 
 _register()

@@ -248,10 +248,10 @@ def data(out: Path, config, console) -> dict:
 def _train_progress(console, label: str):
     state = {"last": 0.0}
 
-    def report(done, total, val_loss, mae):
+    def report(done, total, val_loss, mae, where):
         if time.perf_counter() - state["last"] > 5.0 or done == total:  # a line at least every 5 s
             state["last"] = time.perf_counter()
-            console.print(f"  {label}: epoch {done}/{total}, val. loss {val_loss:.4g}, "
+            console.print(f"  {label}: {where}, val. loss {val_loss:.4g}, "
                           f"MAE x/y/z {mae[0]:.2f}/{mae[1]:.2f}/{mae[2]:.2f} mm")
     return report
 

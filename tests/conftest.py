@@ -79,3 +79,30 @@ def small_run(tmp_path_factory) -> Path:
             shared.mkdir()
             _build_small_run(shared)
     return shared
+
+
+def add_motion_model(export: Path, table: Path = Path(__file__).parent / "data" / "moments_coarse.npz") -> Path:
+    """Give an export folder the motion-and-load model of a moment table (the coarse FE arm's by
+    default), as `persival run` does: activation_motion.onnx and its metadata entry."""
+    from persival.model.arm_file import load_model_file
+    from persival.surrogate.motion_model import MotionActivationModel
+    from persival.tables.moment_table import MomentTable
+
+    model = MotionActivationModel.build(MomentTable.load(table, load_model_file(None)[1], complete=True))
+    entry = model.export_onnx(export)
+    meta = json.loads((export / "metadata.json").read_text())
+    meta["models"]["activation_motion"] = entry
+    (export / "metadata.json").write_text(json.dumps(meta))
+    return export
+
+
+@pytest.fixture(scope="session")
+def motion_export(small_run, tmp_path_factory) -> Path:
+    """The small run's export (analytic arm: SG -> POD net, its angle model) plus the coarse FE
+    arm's motion-and-load model: the models of a real export, two arms' physics (the tests check
+    the chain's arithmetic and the refusals, not one arm's numbers)."""
+    import shutil
+
+    folder = tmp_path_factory.mktemp("motion_export") / "export"
+    shutil.copytree(small_run / "export", folder)
+    return add_motion_model(folder)

@@ -154,6 +154,25 @@ CASES = [
     ("motion", ["--table", "afile", "--out", "new", "--loads", "1,-2"], "negative load", "--loads must be >= 0"),
     ("motion", ["--table", "afile", "--out", "new", "--loads", "nan"], "non-finite load", "not finite"),
     ("motion", ["--table", "afile", "--out", "new", "--angles", "inf"], "non-finite angle", "not finite"),
+    ("motion", [], "neither a table nor a subcommand", "needs --table and --out"),
+    ("motion play", ["--input", "noangle.csv", "--out", "new", "--artifacts", "export"], "no angle column",
+     "which column is the elbow angle"),
+    ("motion play", ["--input", "backwards.csv", "--out", "new", "--artifacts", "export"], "time going backwards",
+     "time does not increase at frame 3"),
+    ("motion play", ["--input", "nan.mot", "--out", "new", "--artifacts", "export"], "NaN in a motion file",
+     "not a finite number"),
+    ("motion play", ["--input", "far.csv", "--out", "new", "--artifacts", "export"], "no frame in the reachable range",
+     "no frame lies inside the model's reachable range"),
+    ("motion play", ["--input", "nosuch.csv", "--out", "new", "--artifacts", "export"], "missing recording",
+     "no such file"),
+    ("motion play", ["--input", "far.csv", "--out", "new", "--artifacts", "folder"], "not an export folder",
+     "metadata.json: missing"),
+    ("motion play", ["--input", "far.csv", "--out", "afile", "--artifacts", "export"], "file where a folder is expected",
+     "is a file, not a folder"),
+    ("motion play", ["--input", "far.csv", "--out", "new", "--artifacts", "export", "--load", "-1"], "negative load", BOX),
+    ("bench viewer", ["--artifacts", "folder"], "not an export folder", "metadata.json: missing"),
+    ("bench viewer", ["--artifacts", "export", "--json", "folder"], "folder where a file is expected",
+     "is a folder, not a file"),
 ]
 
 
@@ -186,6 +205,14 @@ def workdir(tmp_path_factory):
     (root / "nan.csv").write_text("0.1,0.2,nan,0.4,0.5\n")
     run_campaign(root / "random.zarr", Design.random(3, seed=0), SimulatorSpec("analytic", {}), scheduler=INLINE, progress=False)
     _bad_surfaces(root)
+    # recordings for `motion play`, and an export whose reachable range ends below 150 deg
+    from test_server import build_contract_export
+
+    build_contract_export(root / "export")
+    (root / "noangle.csv").write_text("time_s,shoulder_deg\n0,10\n1,20\n")
+    (root / "backwards.csv").write_text("time_s,elbow_angle_deg\n0,40\n1,50\n0.5,60\n")
+    (root / "nan.mot").write_text("Coordinates\ninDegrees=yes\nendheader\ntime\tr_elbow_flex\n0\t40\n0.1\tNaN\n")
+    (root / "far.csv").write_text("time_s,elbow_angle_deg\n0,170\n1,175\n")
     return root
 
 

@@ -111,10 +111,11 @@ async def _sample_rss(pid: int, res: LoadResult, stop: asyncio.Event) -> None:
         await asyncio.sleep(0.1)
 
 
-def _start_server(artifacts: Path, port: int) -> subprocess.Popen:
+def _start_server(artifacts: Path, port: int, quiet: bool = False) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "persival.cli", "serve", "--artifacts", str(artifacts), "--port", str(port),
            "--log-level", "warning"]
-    proc = subprocess.Popen(cmd, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    out = subprocess.DEVNULL if quiet else None  # quiet: the caller prints its own table
+    proc = subprocess.Popen(cmd, env={**os.environ, "PYTHONUNBUFFERED": "1"}, stdout=out, stderr=out)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         if proc.poll() is not None:

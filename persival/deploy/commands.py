@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ipaddress
+import json
 from pathlib import Path
 
 import typer
@@ -72,10 +73,49 @@ def _register_export(app: typer.Typer) -> None:
         typer.echo(f"wrote {out}/metadata.json ({meta['n_nodes']} nodes); serve it: persival serve --artifacts {out}")
 
 
-def register(app: typer.Typer, bench_app: typer.Typer) -> None:
-    """Attach `export` and `serve` to the main app and `serve` to the benchmark group."""
+def _register_motion_play(motion_app: typer.Typer) -> None:
+    @motion_app.command("play")
+    def play(
+        input_: Path = typer.Option(..., "--input", help="Recorded movement: CSV (time s, elbow angle deg, optional "
+                                    "load kg) or OpenSim .mot / .sto."),
+        out: Path = typer.Option(..., "--out", help="Output folder: activations.csv, motion.png, summary.json."),
+        column: str = typer.Option(None, "--column", help="The elbow-angle column (default: found by name, e.g. "
+                                   "r_elbow_flex, elbow_flex_r, elbow_angle_deg)."),
+        load: float = typer.Option(None, "--load", min=0.0, help="Load in the hand, kg, for every frame (default: the "
+                                   "file's load column, else 0)."),
+        artifacts: Path = typer.Option(Path("results/export"), "--artifacts", help="Export folder (persival export)."),
+    ) -> None:
+        """Play a recorded elbow movement through the exported models: activations per frame, target vs
+        achieved angle, frames clamped to the reachable range and frames whose load cannot be held."""
+        from persival.cli_errors import check_output_dir, user_errors
+        from persival.deploy.artifacts import ArtifactError, DeployedModel
+        from persival.deploy.motion_play import play_recording, write_outputs
+        from persival.deploy.recording import read_recording
+
+        with user_errors(ArtifactError, out=out):
+            recording = read_recording(input_, column)
+            check_output_dir(out)
+            model = DeployedModel(artifacts)
+            frames, summary = play_recording(model, recording, load)
+            files = write_outputs(out, frames, summary, model.muscles)
+        peak = ", ".join(f"{m} {v:.2f}" for m, v in summary["peak_activations"].items())
+        typer.echo(f"{summary['frames']} frames over {summary['duration_s']:.2f} s ({recording.column}, "
+                   f"{summary['input_frames']} in the file); {summary['frames_clamped']} clamped to "
+                   f"{summary['range_deg'][0]:.1f}-{summary['range_deg'][1]:.1f} deg; {summary['frames_not_holdable']} "
+                   f"where the muscles cannot hold the load")
+        typer.echo(f"achieved vs target angle: max {summary['angle_error_deg']['max']:.2f} deg, mean "
+                   f"{summary['angle_error_deg']['mean']:.2f} deg; peak activations: {peak}")
+        typer.echo(f"wrote {', '.join(str(f) for f in files)}")
+
+
+def register(app: typer.Typer, bench_app: typer.Typer, motion_app: typer.Typer | None = None) -> None:
+    """Attach `export` and `serve` to the main app, `serve` to the benchmark group and `play` to
+    the `motion` group."""
     _register_export(app)
     _register_serve(app)
+    if motion_app is not None:
+        _register_motion_play(motion_app)
+    _register_bench_viewer(bench_app)
 
     @bench_app.command("serve")
     def bench_serve(
@@ -114,3 +154,50 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             json_out.write_text(json.dumps(summary, indent=2))
         if summary["errors"]:
             raise typer.Exit(1)
+
+
+def _register_bench_viewer(bench_app: typer.Typer) -> None:
+    @bench_app.command("viewer")
+    def bench_viewer(
+        artifacts: Path = typer.Option(Path("results/export"), "--artifacts", help="Export folder to view."),
+        seconds: float = typer.Option(8.0, "--seconds", min=1.0, max=60.0, help="Measured seconds per phase."),
+        width: int = typer.Option(1280, "--width", min=320, max=3840, help="Window width, px."),
+        height: int = typer.Option(800, "--height", min=240, max=2160, help="Window height, px."),
+        trace: bool = typer.Option(True, "--trace/--no-trace", help="Record a Chrome trace of the shipped phase."),
+        json_out: Path = typer.Option(None, "--json", help="Also write the result to this file."),
+        screenshot: Path = typer.Option(None, "--screenshot", help="Also save the default view as a PNG (the report "
+                                        "shows RUN/evaluate/viewer.png)."),
+    ) -> None:
+        """Frame rate of the web viewer in headless Chromium (software GL) while the arm moves every
+        frame, with the frame's profile (the page's own timings and a Chrome trace per thread)."""
+        from rich.console import Console
+        from rich.table import Table
+
+        from persival.cli_errors import check_output_file, user_errors
+        from persival.deploy.artifacts import ArtifactError
+        from persival.deploy.bench_viewer import ViewerBenchError, run_viewer_bench
+
+        with user_errors(ArtifactError, ViewerBenchError):
+            for path, what in ((json_out, "--json"), (screenshot, "--screenshot")):
+                if path is not None:
+                    check_output_file(path, what)
+            result = run_viewer_bench(artifacts, seconds, width, height, trace, screenshot=screenshot)
+        console = Console()
+        table = Table(title=f"viewer, headless Chromium {result.get('chromium', '')}, software GL, {width} x {height}, "
+                            f"{result['export']['n_nodes']} nodes; load average {result['machine']['load_average'][0]:.1f}")
+        for col in ("phase", "fps", "CPU ms / frame", "render scale", "JS ms / state", "JS ms / frame"):
+            table.add_column(col, justify="left" if col == "phase" else "right")
+        for p in result["phases"]:
+            js_state = sum(p["perState"].values())
+            table.add_row(p["phase"], f"{p['fps']:.1f}", f"{p['cpuMsPerFrame']:.1f}", f"{p['renderScale']:.2f}",
+                          f"{js_state:.2f}", f"{p['perFrame']['tickMs']:.2f}")
+        console.print(table)
+        for t in result["phases"][0].get("trace", []):
+            top = "; ".join(f"{e['name']} {e['msPerFrame']:.2f}" for e in t["top"][:3])
+            console.print(f"  {t['thread']}: busy {t['busyMsPerFrame']:.2f} ms/frame ({top})", markup=False)
+        if json_out is not None:
+            json_out.parent.mkdir(parents=True, exist_ok=True)
+            json_out.write_text(json.dumps(result, indent=1))
+            console.print(f"wrote {json_out}")
+        if screenshot is not None:
+            console.print(f"wrote {screenshot}")

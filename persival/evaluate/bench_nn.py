@@ -21,7 +21,7 @@ from persival.evaluate.run_layout import LoadedRun, scope_slice
 from persival.evaluate.tables import make_table
 from persival.evaluate.timing import blas_threads, time_calls, torch_threads
 
-__all__ = ["BENCH_COLUMNS", "bench_table", "heldout_accuracy"]
+__all__ = ["BENCH_COLUMNS", "TERMINAL_COLUMNS", "bench_table", "heldout_accuracy"]
 
 BENCH_COLUMNS = [
     ("variant", "variant", "{}"), ("runtime", "runtime", "{}"), ("threads", "threads", "{}"), ("batch", "batch", "{:d}"),
@@ -31,6 +31,11 @@ BENCH_COLUMNS = [
     ("speedup_vs_tflite", "x faster than TFLite peer", "{:.1f}"),
 ]
 BATCHES = (1, 64)
+#: The terminal's view of the table (readable at 80 columns): variant over runtime in one cell, the
+#: columns a reader compares; every column is in bench_nn.md / .json.
+TERMINAL_COLUMNS = [("variant / runtime", ["variant", "runtime"]), ("thr", ["threads"]), ("batch", ["batch"]),
+                    ("ms/\nstate", ["ms_per_state|ms_per_call"]), ("MB", ["file_mb"]), ("MaxAE\nmm", ["heldout_maxae_mm"]),
+                    ("MAE\nmm", ["heldout_mae_mm"]), ("x\nTFLite", ["speedup_vs_tflite"])]
 
 
 def heldout_accuracy(predict, truth, scope_surfaces, scope: str) -> dict:
@@ -150,11 +155,13 @@ def _sg_rows(run: LoadedRun, truth, reps, budget_s) -> list[dict]:
 
 
 def _peer_rows(activation, reps, budget_s, console) -> tuple[list[dict], dict]:
+    from rich.markup import escape
+
     from persival.evaluate.tflite_peer import INSTALL_HINT, peer_available, run_in_subprocess
 
     if not peer_available():
-        if console is not None:
-            console.print(f"[yellow]{INSTALL_HINT}[/yellow]")
+        if console is not None:  # escaped: rich would take "[peer]" in the hint for a style tag
+            console.print(f"[yellow]{escape(INSTALL_HINT)}[/yellow]")
         return [], {"installed": False, "hint": INSTALL_HINT}
     import subprocess
 
@@ -162,7 +169,7 @@ def _peer_rows(activation, reps, budget_s, console) -> tuple[list[dict], dict]:
         result = run_in_subprocess(2809, 700, activation, reps, budget_s)
     except (RuntimeError, subprocess.TimeoutExpired) as exc:
         if console is not None:
-            console.print(f"[yellow]{exc}[/yellow]")
+            console.print(f"[yellow]{escape(str(exc))}[/yellow]")
         return [], {"installed": True, "hint": f"the peer is installed but failed: {exc}"}
     rows = [_row("paper arch 5->2809, combined", r["runtime"], r["threads"], r["batch"], r,
                  parameters=result["parameters"],

@@ -312,10 +312,14 @@ def _register_evaluate(app: typer.Typer) -> None:
             check_output_dir(layout.evaluate)
             result = evaluate_run(run, progress=True, bench=bench, peer=peer, max_draws=max_draws, n_states=states,
                                   console=console)
-        for table in result["tables"].values():
-            console.print(to_rich(table))
+        from rich.markup import escape
+
+        from persival.evaluate.bench_nn import TERMINAL_COLUMNS
+
+        for name, table in result["tables"].items():
+            console.print(to_rich(table, TERMINAL_COLUMNS if name == "bench_nn" else None))
         for name, why in result["skipped"].items():
-            console.print(f"[yellow]skipped {name}: {why}[/yellow]")
+            console.print(f"[yellow]skipped {name}:[/yellow] {escape(str(why))}")
         console.print(f"wrote {layout.evaluate}/ ({len(result['tables'])} tables, {len(result['figures'])} figures) "
                       f"in {result['wall_time_s']:.0f} s; next: persival report --run {run}")
 
@@ -351,6 +355,7 @@ def _register_bench_nn(bench_app: typer.Typer) -> None:
         from rich.console import Console
 
         from persival.campaign.store import StoreError
+        from persival.evaluate.bench_nn import TERMINAL_COLUMNS
         from persival.evaluate.run_layout import RunLayout
         from persival.evaluate.stage import run_bench
         from persival.evaluate.tables import to_rich
@@ -361,10 +366,10 @@ def _register_bench_nn(bench_app: typer.Typer) -> None:
             layout.check()
             check_output_dir(layout.evaluate)
             table = run_bench(run, progress=True, reps=reps, budget_s=budget, peer=peer, console=console)
-        console.print(to_rich(table))
+        console.print(to_rich(table, TERMINAL_COLUMNS))
         for note in table["notes"]:
-            console.print(f"  {note}")
-        console.print(f"wrote {layout.evaluate / 'bench_nn.md'} and {layout.evaluate / 'bench_nn.json'}")
+            console.print(f"  {note}", markup=False)
+        console.print(f"wrote {layout.evaluate / 'bench_nn.md'} (every column) and {layout.evaluate / 'bench_nn.json'}")
 
 
 def _curve_tables(console, arm):

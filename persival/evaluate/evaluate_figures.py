@@ -2,7 +2,8 @@
 
 The hot-spot map (the paper's figure of where the network errs) colours every biceps surface
 node by its mean error against the SG over the same random activations, one panel per network
-(the paper net after a short and after its full training, the POD net), drawn with off-screen
+(the paper net after a short and after its full training, the POD net), each panel on its own
+colour scale (the panels' errors differ by orders of magnitude), drawn with off-screen
 pyvista at the reference configuration; matplotlib's 3-D trisurf stands in if VTK cannot
 render.
 """
@@ -39,7 +40,12 @@ def hotspot_errors(predict, net_surfaces, sg, n: int = 500, seed: int = 7, muscl
     return total / n
 
 
-def _pyvista_panels(points, triangles, maps: dict[str, np.ndarray], path: Path, top: float) -> None:
+def _top(values: np.ndarray) -> float:
+    """A panel's own colour-scale top: its largest node error (1 mm for an all-zero map)."""
+    return float(np.max(values)) or 1.0
+
+
+def _pyvista_panels(points, triangles, maps: dict[str, np.ndarray], path: Path) -> None:
     from persival.evaluate.render import headless_vtk
 
     headless_vtk()  # before pyvista: no "bad X server connection" on a machine without a display
@@ -51,9 +57,12 @@ def _pyvista_panels(points, triangles, maps: dict[str, np.ndarray], path: Path, 
     for k, (label, values) in enumerate(maps.items()):
         plotter.subplot(0, k)
         mesh = pv.PolyData(np.asarray(points, dtype=float), faces)
-        mesh["mean error (mm)"] = values
-        plotter.add_mesh(mesh, scalars="mean error (mm)", cmap="inferno", clim=(0.0, top), smooth_shading=True,
-                         scalar_bar_args={"title": "mean error (mm)", "vertical": False})
+        # each panel its own scale bar: pyvista shares a bar between meshes of one title, so the titles differ
+        name = f"mean error (mm), {label}"
+        mesh[name] = values
+        plotter.add_mesh(mesh, scalars=name, cmap="inferno", clim=(0.0, _top(values)), smooth_shading=True,
+                         scalar_bar_args={"title": "mean error (mm)" + " " * k, "vertical": False, "n_labels": 4,
+                                          "fmt": "%.2g"})
         plotter.add_text(f"{label}\nmean {values.mean():.3f} mm, max {values.max():.3f} mm", font_size=10)
         plotter.view_vector((1.0, 0.0, 0.0), viewup=(0.0, 0.0, 1.0))
         plotter.reset_camera()
@@ -61,7 +70,7 @@ def _pyvista_panels(points, triangles, maps: dict[str, np.ndarray], path: Path, 
     plotter.close()
 
 
-def _matplotlib_panels(points, triangles, maps: dict[str, np.ndarray], path: Path, top: float) -> None:
+def _matplotlib_panels(points, triangles, maps: dict[str, np.ndarray], path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -74,7 +83,7 @@ def _matplotlib_panels(points, triangles, maps: dict[str, np.ndarray], path: Pat
         surf = ax.plot_trisurf(points[:, 0], points[:, 1], points[:, 2], triangles=triangles, cmap="inferno",
                                linewidth=0, antialiased=False)
         surf.set_array(face_values)
-        surf.set_clim(0.0, top)
+        surf.set_clim(0.0, _top(values))
         ax.set_title(f"{label}\nmean {values.mean():.3f} mm, max {values.max():.3f} mm", fontsize=9)
         ax.view_init(elev=0, azim=0)
         ax.set_axis_off()
@@ -83,14 +92,15 @@ def _matplotlib_panels(points, triangles, maps: dict[str, np.ndarray], path: Pat
 
 
 def plot_hotspots(points, triangles, maps: dict[str, np.ndarray], path: str | Path) -> Path:
-    """One panel per entry of ``maps`` (label -> per-node mean error, mm), one shared colour scale."""
+    """One panel per entry of ``maps`` (label -> per-node mean error, mm), each with its own colour
+    scale from 0 to its largest error: a shared scale let one poorly trained net (tens of mm) turn
+    the trained ones (a few mm) into one flat colour. Each panel's mean and max are in its title."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    top = max(float(np.max(v)) for v in maps.values()) or 1.0
     try:
-        _pyvista_panels(points, triangles, maps, path, top)
+        _pyvista_panels(points, triangles, maps, path)
     except Exception:  # no usable VTK render window here: the same picture through matplotlib
-        _matplotlib_panels(points, triangles, maps, path, top)
+        _matplotlib_panels(points, triangles, maps, path)
     return path
 
 

@@ -16,6 +16,7 @@ import html
 import json
 from pathlib import Path
 
+from persival.evaluate.report_summary import headline, headline_html, provenance_rows, stage_records
 from persival.evaluate.tables import load_table, to_html
 
 __all__ = ["write_report", "TABLE_ORDER"]
@@ -31,6 +32,11 @@ tr.paper td { background: #fff8e6; color: #555; font-style: italic; }
 .scroll { overflow-x: auto; } figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #ddd; }
 code, pre { font-size: 0.8em; } pre { background: #f6f6f6; padding: 0.5em; overflow-x: auto; }
 .provenance { color: #666; font-size: 0.75em; word-break: break-all; }
+#summary { background: #f4f8fc; border: 1px solid #cfe0f0; padding: 0.3em 1em 1em; border-radius: 6px; }
+table.summary td, table.summary th { white-space: normal; text-align: left; vertical-align: top; }
+table.summary td:first-child { font-weight: 600; }
+.pictures { display: flex; gap: 1em; flex-wrap: wrap; } .pictures figure { flex: 1 1 420px; margin: 0.5em 0; }
+table.kv td { text-align: left; white-space: normal; }
 """
 
 
@@ -106,13 +112,24 @@ def _load_tables(folder: Path) -> dict[str, dict]:
     return {n: tables[n] for n in order}
 
 
-def _page(out: Path, tables: dict, figures: list, provenance: dict, configs: dict, source: str) -> str:
+def _data_uri(path: Path) -> str:
+    return "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode("ascii")
+
+
+def _kv_table(rows) -> str:
+    esc = html.escape
+    return '<table class="kv">' + "".join(f"<tr><td>{esc(str(k))}</td><td>{esc(str(v))}</td></tr>" for k, v in rows) + "</table>"
+
+
+def _page(out: Path, tables: dict, figures: list, provenance: dict, configs: dict, source: str, summary: dict,
+          stages: dict | None) -> str:
     esc = html.escape
     parts = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">', '<link rel="icon" href="data:,">',
              f"<title>PerSival report: {esc(out.name)}</title><style>{_CSS}</style></head><body>",
              "<h1>PerSival: the paper's tables on our arm</h1>",
              f"<p>Run folder <code>{esc(str(out))}</code>; data: <strong>{esc(source)}</strong>. "
              "Rows marked <em>paper</em> are the paper's figures for its own arm model, beside ours.</p>",
+             headline_html(summary, lambda rel: _data_uri(out / rel)),
              "<h2>Contents</h2><ul>" + "".join(f'<li><a href="#table-{esc(n)}">{esc(t["title"])}</a></li>'
                                                for n, t in tables.items())
              + '<li><a href="#figures">Figures</a></li><li><a href="#provenance">Provenance</a></li></ul>',
@@ -120,11 +137,16 @@ def _page(out: Path, tables: dict, figures: list, provenance: dict, configs: dic
     parts += [f'<div class="scroll">{to_html(t)}</div>' for t in tables.values()]
     parts.append('<h2 id="figures">Figures</h2>')
     for caption, path in figures:
-        data = base64.b64encode(path.read_bytes()).decode("ascii")
-        parts.append(f'<figure><img alt="{esc(caption)}" src="data:image/png;base64,{data}">'
+        parts.append(f'<figure><img alt="{esc(caption)}" src="{_data_uri(path)}">'
                      f"<figcaption>{esc(caption)}</figcaption></figure>")
     parts.append('<h2 id="provenance">Provenance</h2>')
-    parts.append(f"<pre>{esc(json.dumps(provenance, indent=1, default=str))}</pre>")
+    parts.append(_kv_table([("report command", provenance.get("report_command")), *provenance_rows(provenance)]))
+    if stages:
+        parts.append("<h3>Stages of the run</h3>")
+        parts.append(_kv_table([(name, f"{r['wall_time_s']:.1f} s, inputs digest {r.get('digest')}")
+                                for name, r in stages.items() if name != "run" and "wall_time_s" in r]))
+    parts.append("<details><summary>Every table's inputs and the full record (JSON)</summary>")
+    parts.append(f"<pre>{esc(json.dumps(provenance, indent=1, default=str))}</pre></details>")
     parts.append("<h3>Configuration</h3>")
     parts.append(f"<pre>{esc(json.dumps(configs, indent=1, default=str))}</pre>")
     parts.append("</body></html>")
@@ -149,15 +171,15 @@ def write_report(out: str | Path, command: str | None = None) -> Path:
     configs = _configs(out)
     figures = _figures(out)
     source = evaluation.get("source") or configs.get("sg", {}).get("label") or "unknown source"
+    summary, stages = headline(out, tables), stage_records(out)
     report = out / "report"
     report.mkdir(parents=True, exist_ok=True)
     index = report / "index.html"
-    index.write_text(_page(out, tables, figures, provenance, configs, source))
-    summary = out / "summary.json"
+    index.write_text(_page(out, tables, figures, provenance, configs, source, summary, stages))
     results = {"format": "persival-results", "run": str(out), "source": source,
-               "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"), "provenance": provenance,
-               "configuration": configs, "tables": tables, "figures": [c for c, _ in figures],
-               "stages": json.loads(summary.read_text()) if summary.is_file() else None,
+               "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"), "summary": summary,
+               "provenance": provenance, "configuration": configs, "tables": tables,
+               "figures": [c for c, _ in figures], "stages": stages,
                "deployed": evaluation.get("deployed")}
     (report / "results.json").write_text(json.dumps(results, indent=1, default=float))
     return index

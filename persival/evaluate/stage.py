@@ -33,7 +33,7 @@ def environment() -> dict:
             versions[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
             continue
-    return {"versions": versions,
+    return {"git": source_revision(), "versions": versions,
             "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
                         "cpu_count": os.cpu_count(), "node": platform.node()},
             "date": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")}
@@ -46,6 +46,26 @@ def deployed_summary(export: Path) -> dict | None:
     if not metadata.is_file():
         return None
     return json.loads(metadata.read_text()).get("provenance", {}).get("deployed")
+
+
+def source_revision() -> dict:
+    """The git commit of this package's source (and whether files differ from it), if it is a checkout."""
+    import subprocess
+
+    where = Path(__file__).resolve().parent
+
+    def git(*args):
+        try:
+            proc = subprocess.run(["git", *args], cwd=where, capture_output=True, text=True, timeout=10)
+        except (OSError, subprocess.TimeoutExpired):
+            return None
+        return proc.stdout.strip() if proc.returncode == 0 else None
+
+    commit = git("rev-parse", "HEAD")
+    if commit is None:
+        return {"commit": None}
+    status = git("status", "--porcelain", "--untracked-files=no")
+    return {"commit": commit, "branch": git("rev-parse", "--abbrev-ref", "HEAD"), "dirty": bool(status)}
 
 
 def default_command(out, what: str = "evaluate") -> str:

@@ -40,21 +40,28 @@ class HeldOutStates:
     source: dict = field(default_factory=dict)  # describe_source: simulator, profile, states, label
 
 
-def load_held_out(store_path: str | Path, muscle: str = "biceps") -> HeldOutStates:
-    """The done states of a campaign store (failed or missing states are left out)."""
+def load_held_out(store_path: str | Path, muscles="biceps") -> HeldOutStates:
+    """The done states of a campaign store (failed or missing states are left out).
+
+    ``muscles``: one surface name, a surrogate's label of several ("biceps+brachialis+...", the
+    order of its node list) or a sequence of names; several surfaces are concatenated in that order.
+    """
     from persival.campaign.store import CampaignStore
 
+    names = muscles.split("+") if isinstance(muscles, str) else list(muscles)
     with CampaignStore.open(store_path) as store:
         reference = store.reference
-        if muscle not in reference.surfaces:
-            raise ValueError(f"{store_path} has no surface {muscle!r}; it has {sorted(reference.surfaces)}")
+        missing = [m for m in names if m not in reference.surfaces]
+        if missing:
+            raise ValueError(f"{store_path} has no surface {missing[0]!r}; it has {sorted(reference.surfaces)}")
         done = np.flatnonzero(store.done_mask())
         if not len(done):
             raise ValueError(f"{store_path} has no done state to test against")
+        positions = np.concatenate([store.surface_positions(m, done) for m in names], axis=1)
+        reference_points = np.concatenate([np.asarray(reference.surfaces[m].reference_points) for m in names])
         return HeldOutStates(
-            store.activations[done], store.surface_positions(muscle, done), store.elbow_angles()[done],
-            np.asarray(reference.surfaces[muscle].reference_points), reference.model_hash, str(store_path),
-            describe_source(store.summary(), reference.description, len(done)),
+            store.activations[done], positions, store.elbow_angles()[done], reference_points,
+            reference.model_hash, str(store_path), describe_source(store.summary(), reference.description, len(done)),
         )
 
 

@@ -83,16 +83,49 @@ def to_html(table: dict) -> str:
     return "\n".join(out)
 
 
-def to_rich(table: dict):
+def to_rich(table: dict, columns: list[tuple[str, list[str]]] | None = None):
+    """A rich Table. ``columns``: None for every column, or a narrow view for a terminal:
+    (label, keys) pairs whose cell stacks the keys' values one per line (e.g. variant over
+    runtime; "a|b": a, or b where a row has no a), paper rows marked "paper:" in their first
+    cell. Cells are plain text, never markup (a "[peer]" in a cell is printed as written)."""
     from rich.table import Table
+    from rich.text import Text
 
-    header, body = _grid(table)
-    t = Table(title=table["title"], caption=table["description"] if len(table["description"]) < 200 else None)
-    for k, h in enumerate(header):
-        t.add_column(h or "", justify="left" if k < 3 else "right")
+    if columns is None:
+        header, body = _grid(table)
+        t = Table(title=table["title"], caption=table["description"] if len(table["description"]) < 200 else None)
+        for k, h in enumerate(header):
+            t.add_column(h or "", justify="left" if k < 3 else "right")
+        for kind, cells in body:
+            t.add_row(*(Text(c) for c in cells), style="dim" if kind == "paper" else None)
+        return t
+    from rich import box
+
+    formats = {c["key"]: c["format"] for c in table["columns"]}
+    body = []
+    for kind, rows in (("ours", table["rows"]), ("paper", table["paper"])):
+        for r in rows:
+            cells = ["\n".join(_first(r, key, formats) for key in keys) for _, keys in columns]
+            if kind == "paper":
+                cells[0] = f"paper: {cells[0]}"
+            body.append((kind, cells))
+    t = Table(title=table["title"], box=box.SIMPLE_HEAD, padding=(0, 1), pad_edge=False)
+    for k, (label, _) in enumerate(columns):
+        if k == 0:  # takes what the numbers leave, wrapping at words
+            t.add_column(label, justify="left")
+        else:  # as wide as its widest entry, never wrapped
+            width = max(len(line) for text in [label] + [c[k] for _, c in body] for line in text.splitlines())
+            t.add_column(label, justify="right", no_wrap=True, width=width)
     for kind, cells in body:
-        t.add_row(*cells, style="dim" if kind == "paper" else None)
+        t.add_row(*(Text(c) for c in cells), style="dim" if kind == "paper" else None)
     return t
+
+
+def _first(row: dict, keys: str, formats: dict) -> str:
+    for key in keys.split("|"):
+        if row.get(key) is not None:
+            return cell(row[key], formats.get(key, "{}"))
+    return "-"
 
 
 def save_table(table: dict, folder: str | Path) -> tuple[Path, Path]:

@@ -11,8 +11,9 @@ from persival.cli_help import FullHelpGroup
 from persival.cli_values import parse_numbers
 
 
-def register(app: typer.Typer, bench_app: typer.Typer) -> None:
-    """Attach this stage's commands to the main app and the benchmark group."""
+def register(app: typer.Typer, bench_app: typer.Typer) -> typer.Typer:
+    """Attach this stage's commands to the main app and the benchmark group; returns the `motion`
+    group (later stages add subcommands to it)."""
     surrogate_app = typer.Typer(cls=FullHelpGroup, help="Surrogates fitted to campaign stores.", no_args_is_help=True)
     app.add_typer(surrogate_app, name="surrogate")
 
@@ -119,7 +120,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
         )
 
     _register_inverse_and_networks(app)
-    _register_motion(app)
+    return _register_motion(app)
 
 
 def _angles(text: str) -> list[float]:
@@ -137,7 +138,9 @@ def _progress_bar(description: str):
     task = bar.add_task(description, total=None, info="")
 
     def advance(done, total, *info):
-        text = f"val loss {info[0]:.4g}, MAE {', '.join(f'{v:.3f}' for v in info[1])} mm" if len(info) == 2 else ""
+        # training: (val loss, MAE per coordinate, "fold f/F epoch e/E"); other stages: nothing
+        text = (f"{info[2]}, val loss {info[0]:.4g}, MAE {', '.join(f'{v:.3f}' for v in info[1])} mm"
+                if len(info) == 3 else "")
         bar.update(task, completed=done if done > 1 or total is None else bar.tasks[0].completed + done,
                    total=total, info=text)
 
@@ -245,38 +248,55 @@ def _loads(text: str) -> list[float]:
     return parse_numbers(text, "--loads", "kg", minimum=0.0)
 
 
-def _register_motion(app: typer.Typer) -> None:
-    @app.command("motion")
+def _register_motion(app: typer.Typer) -> typer.Typer:
+    """`persival motion --table ...` builds the model; its subcommands (`motion play`, from the
+    deploy stage) use an export. Returns the group for them."""
+    motion_app = typer.Typer(cls=FullHelpGroup, help="The motion-and-load activation model (SPEC 5): build it from a "
+                             "moment table (options below), or play a recorded movement (motion play).")
+    app.add_typer(motion_app, name="motion")
+
+    @motion_app.callback(invoke_without_command=True)
     def motion(
-        table: Path = typer.Option(..., "--table", help="Moment table (persival moments --out)."),
-        out: Path = typer.Option(..., "--out", help="Output folder: motion_model.json/.npz, motion_model.png, "
+        ctx: typer.Context,
+        table: Path = typer.Option(None, "--table", help="Moment table (persival moments --out)."),
+        out: Path = typer.Option(None, "--out", help="Output folder: motion_model.json/.npz, motion_model.png, "
                                  "activation_motion.onnx."),
         model: Path = typer.Option(None, "--model", help="Model file the table must belong to; default: the built-in arm."),
         angles: str = typer.Option("30,60,90,120", "--angles", help="Elbow angles (deg) of the printed table."),
         loads: str = typer.Option("0,1,2,5", "--loads", help="Hand loads (kg) of the printed table."),
     ) -> None:
         """The motion-and-load activation model from a moment table: build, plot, ONNX."""
-        import numpy as np
-        from rich.console import Console
+        if ctx.invoked_subcommand is not None:
+            return
+        if table is None or out is None:
+            fail("persival motion needs --table and --out (build the model), or a subcommand: motion play --input FILE")
+        _build_motion(table, out, model, angles, loads)
 
-        from persival.model.arm_file import load_model_file
-        from persival.surrogate.motion_model import MotionActivationModel, plot_motion_model
-        from persival.tables.moment_table import MomentTable
+    return motion_app
 
-        with user_errors(out=out):
-            targets, masses = _angles(angles), _loads(loads)
-            if not np.isfinite(targets).all():
-                raise ValueError(f"--angles must be finite, got {angles!r}")
-            check_output_dir(out)
-            moments = MomentTable.load(table, load_model_file(model)[1], complete=True)
-            model_ = MotionActivationModel.build(moments)
-            rows = np.array([[t, 0.0, 0.0, m] for t in targets for m in masses])
-            activations, feasible = model_.predict(rows)  # angles outside the range: a user error
-            out.mkdir(parents=True, exist_ok=True)
-            model_.save(out)
-            entry = model_.export_onnx(out)
-            plot = plot_motion_model(model_, out / "motion_model.png")
-        _print_motion(Console(), model_, rows, activations, feasible, entry, plot)
+
+def _build_motion(table: Path, out: Path, model: Path | None, angles: str, loads: str) -> None:
+    import numpy as np
+    from rich.console import Console
+
+    from persival.model.arm_file import load_model_file
+    from persival.surrogate.motion_model import MotionActivationModel, plot_motion_model
+    from persival.tables.moment_table import MomentTable
+
+    with user_errors(out=out):
+        targets, masses = _angles(angles), _loads(loads)
+        if not np.isfinite(targets).all():
+            raise ValueError(f"--angles must be finite, got {angles!r}")
+        check_output_dir(out)
+        moments = MomentTable.load(table, load_model_file(model)[1], complete=True)
+        model_ = MotionActivationModel.build(moments)
+        rows = np.array([[t, 0.0, 0.0, m] for t in targets for m in masses])
+        activations, feasible = model_.predict(rows)  # angles outside the range: a user error
+        out.mkdir(parents=True, exist_ok=True)
+        model_.save(out)
+        entry = model_.export_onnx(out)
+        plot = plot_motion_model(model_, out / "motion_model.png")
+    _print_motion(Console(), model_, rows, activations, feasible, entry, plot)
 
 
 def _print_motion(console, model, rows, activations, feasible, entry, plot) -> None:

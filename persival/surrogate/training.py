@@ -115,11 +115,20 @@ def resolve_device(device: str = "auto") -> torch.device:
     return torch.device("cuda" if device == "cuda" or (device == "auto" and torch.cuda.is_available()) else "cpu")
 
 
+def epoch_label(fold: int, folds: int, epoch: int, epochs: int) -> str:
+    """"fold 2/5 epoch 12/100" (fold counted from 1): epochs restart every fold, so a running count
+    over all folds ("epoch 202/500") would read like a blow-up when the validation loss jumps back."""
+    return f"fold {fold + 1}/{folds} epoch {epoch}/{epochs}"
+
+
 def train(dataset, config: TrainingConfig, out: str | Path, progress=None, device: str = "auto"):
     """Train on ``dataset`` (its displacements and elbow angles); returns (best net, history).
     ``device``: where the epochs run (:func:`resolve_device`); the result is a CPU net either way,
-    and the device is not part of the configuration (a checkpoint resumes on another one)."""
-    where = resolve_device(device)
+    and the device is not part of the configuration (a checkpoint resumes on another one).
+
+    ``progress(done, total, val_loss, mae_xyz, where)`` after every epoch: ``done`` of ``total``
+    epochs over all folds (for a progress bar), ``where`` = :func:`epoch_label`."""
+    place = resolve_device(device)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
@@ -130,9 +139,9 @@ def train(dataset, config: TrainingConfig, out: str | Path, progress=None, devic
     state = _resume(checkpoint, config, dataset)
     template = build_net(config, u.shape[1], rank)
     template.fit_normalization(u, angles, pod)  # POD and scales from all training states, as deployed
-    x = torch.as_tensor(dataset.activations, dtype=torch.float32, device=where)
-    y = torch.as_tensor(template.targets(u, angles), dtype=torch.float32, device=where)
-    ut = torch.as_tensor(u, device=where)
+    x = torch.as_tensor(dataset.activations, dtype=torch.float32, device=place)
+    y = torch.as_tensor(template.targets(u, angles), dtype=torch.float32, device=place)
+    ut = torch.as_tensor(u, device=place)
     if state is None:
         state = {"config": asdict(config), "digest": dataset.digest(), "fold": 0, "epoch": 0, "net": None,
                  "optimizer": None, "best": None, "history": [], "wall_time_s": 0.0}
@@ -142,8 +151,8 @@ def train(dataset, config: TrainingConfig, out: str | Path, progress=None, devic
         generator.set_state(state["generator"])
     total_epochs = config.folds * config.epochs
     while state["fold"] < len(folds):
-        train_rows, val_rows = (torch.as_tensor(r, device=where) for r in folds[state["fold"]])
-        net = copy.deepcopy(template).to(where)
+        train_rows, val_rows = (torch.as_tensor(r, device=place) for r in folds[state["fold"]])
+        net = copy.deepcopy(template).to(place)
         optimizer = torch.optim.Adam(net.parameters(), lr=config.learning_rate)
         schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=config.epochs, eta_min=config.learning_rate / 50)
         if state["net"] is not None:  # resuming inside this fold
@@ -167,7 +176,8 @@ def train(dataset, config: TrainingConfig, out: str | Path, progress=None, devic
                          generator=generator.get_state(), wall_time_s=state["wall_time_s"] + time.perf_counter() - t0)
             _save_atomic(state, checkpoint)
             if progress is not None:
-                progress(state["fold"] * config.epochs + state["epoch"], total_epochs, val_loss, mae)
+                progress(state["fold"] * config.epochs + state["epoch"], total_epochs, val_loss, mae,
+                         epoch_label(state["fold"], len(folds), state["epoch"], config.epochs))
         state.update(fold=state["fold"] + 1, epoch=0, net=None, optimizer=None, schedule=None)
         _save_atomic(state, checkpoint)
     best = copy.deepcopy(template)

@@ -28,11 +28,12 @@ const browser = await chromium.launchPersistentContext(profile, {
     '--disable-gpu-vsync', '--disable-frame-rate-limit'],
 });
 
-// A 1/4-scale grey copy of the canvas, to count the pixels a change of state altered.
-const grab = () => window.persival.viewer.scene.renderer.domElement.toDataURL('image/png');
+// A 1/4-scale grey copy of the canvas, to count the pixels a change of state altered. The page's
+// drawing buffer is not preserved after it is shown, so draw and copy in the same task.
 async function pixels(page) {
   return page.evaluate(async () => {
     const c = document.getElementById('view');
+    window.persival.viewer.scene.render();
     const t = document.createElement('canvas');
     t.width = c.width >> 2; t.height = c.height >> 2;
     const ctx = t.getContext('2d');

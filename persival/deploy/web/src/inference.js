@@ -71,6 +71,17 @@ export class LocalEngine {
     return Float32Array.from(out[m.output].data);
   }
 
+  // Activations and, where the graph has it, the moment deficit (N mm, 0 where the muscles hold).
+  async motionWithDeficit(rows) {
+    const m = this.meta.models.activation_motion;
+    const s = await this.session(m.file);
+    const flat = new Float32Array(rows.length * 4);
+    rows.forEach((r, i) => flat.set(r, 4 * i));
+    const out = await s.run({ [m.input]: new ort.Tensor('float32', flat, [rows.length, 4]) });
+    const deficit = out.moment_deficit_Nmm ? Float32Array.from(out.moment_deficit_Nmm.data) : null;
+    return { activations: Float32Array.from(out[m.output].data), deficit };
+  }
+
   async activationsForMotion(angle, velocity, acceleration, load) {
     const m = this.meta.models.activation_motion;
     const s = await this.session(m.file);

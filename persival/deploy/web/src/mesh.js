@@ -1,24 +1,39 @@
 // Per-frame geometry work on raw typed arrays, allocated once: the model writes positions, we
-// colour by displacement and recompute area-weighted vertex normals (a bulging muscle must be lit
-// as it is now, not as it was in the reference pose).
+// colour them and recompute area-weighted vertex normals (a bulging muscle must be lit as it is
+// now, not as it was in the reference pose). Two colourings: displacement |x - X| from the
+// hanging arm (the state at zero activations, as the FE pictures measure it), or each muscle in
+// one colour by its activation.
 import { LUT } from './colormap.js';
 
 export class MuscleBuffers {
-  constructor(reference, triangles) {
+  constructor(reference, triangles, ranges) {
     this.n = reference.length / 3;
-    this.reference = reference;
+    this.reference = reference; // replaced by the hanging arm once the model has run
     this.index = triangles;
+    this.ranges = ranges; // per muscle [first node, node count]
     this.positions = new Float32Array(reference);
     this.normals = new Float32Array(reference.length);
     this.colors = new Float32Array(reference.length);
     this.displacement = new Float32Array(this.n);
     this.scaleMm = 1;
+    this.activations = null; // set: colour by activation instead of displacement
   }
 
   update(positions) {
     this.positions.set(positions);
-    this.colour();
+    if (this.activations) this.colourByActivation(this.activations);
+    else this.colour();
     this.computeNormals();
+  }
+
+  colourByActivation(a) {
+    const colors = this.colors;
+    this.ranges.forEach(([start, count], m) => {
+      const k = 3 * Math.min(255, Math.max(0, Math.round(a[m] * 255)));
+      for (let j = 3 * start, end = 3 * (start + count); j < end; j += 3) {
+        colors[j] = LUT[k]; colors[j + 1] = LUT[k + 1]; colors[j + 2] = LUT[k + 2];
+      }
+    });
   }
 
   colour() {

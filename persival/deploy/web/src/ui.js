@@ -1,7 +1,7 @@
 // The control panel, the heads-up display and the legend; no model logic here.
 import { cssColor } from './colormap.js';
 
-const SWATCH = ['#e76f51', '#f4a261', '#e9c46a', '#2a9d8f', '#8ab17d'];
+export const SWATCH = ['#e76f51', '#f4a261', '#e9c46a', '#2a9d8f', '#8ab17d'];
 
 export function buildSliders(muscles, onInput) {
   const host = document.getElementById('sliders');
@@ -18,7 +18,8 @@ export function buildSliders(muscles, onInput) {
   });
 }
 
-export function drawLegend(maxMm) {
+export function drawLegend(maxMm, title) {
+  document.querySelector('#legend .legend-title').textContent = title;
   const bar = document.getElementById('legend-bar');
   const ctx = bar.getContext('2d');
   for (let x = 0; x < bar.width; x++) {
@@ -31,7 +32,7 @@ export function drawLegend(maxMm) {
     const s = document.createElement('span');
     s.style.left = `${(k / 4) * 100}%`;
     const v = (maxMm * k) / 4;
-    s.textContent = Number.isInteger(v) ? String(v) : v.toFixed(1);
+    s.textContent = Number.isInteger(v) ? String(v) : v.toFixed(maxMm <= 1 ? 2 : 1);
     ticks.appendChild(s);
   }
 }
