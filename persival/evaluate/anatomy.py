@@ -1,4 +1,4 @@
-"""`persival anatomy`: overlap between bodies and bed gaps of solved arm states (SPEC 3.3, anatomy).
+"""`persival anatomy`: overlap between bodies and bed gaps of solved arm states (docs/arm_model.md, "Overlap between bodies").
 
 Reads the FE stage's state directories (one VTU per muscle and bone at its deformed position)
 or a campaign store of the FE arm (muscle surfaces per state; the bones are placed from the
@@ -25,7 +25,7 @@ from persival.vocabulary import MUSCLES
 __all__ = ["check_outlines_table", "check_state_dirs", "check_store", "print_tables", "MUSCLE_BONE_LIMIT_MM",
            "MUSCLE_MUSCLE_LIMIT_MM"]
 
-# SPEC 3.3: in any state, penetration muscle-bone <= 1 mm and muscle-muscle <= 2 mm
+# docs/arm_model.md: in any state, penetration muscle-bone <= 1 mm and muscle-muscle <= 2 mm
 MUSCLE_BONE_LIMIT_MM = 1.0
 MUSCLE_MUSCLE_LIMIT_MM = 2.0
 

@@ -104,7 +104,7 @@ def headline_html(summary: dict, image) -> str:
         rows.append(("one state, batch 1 (CPU)", f"{speed['batch1_ms']:.3f} ms ({esc(speed['variant'])}, "
                      f"{speed['threads']} thread){here}", f"{speed['paper_tflite_ms']:.2f} ms (TFLite, their i5)"))
     if size:
-        rows.append(("model file (float32)", f"{size['float32_mb']:.2f} MB (SPEC 8 target: at most {size['target_mb']:g} MB)",
+        rows.append(("model file (float32)", f"{size['float32_mb']:.2f} MB (target: at most {size['target_mb']:g} MB)",
                      f"{_f(size['paper_architecture_mb'], '{:.1f}', ' MB')} (their architecture, "
                      f"{esc(size['paper_architecture_as'])})"))
     nodes = f", {summary['nodes']} surface nodes" if summary.get("nodes") else ""

@@ -75,7 +75,7 @@ class ArmKinematics:
 
         L is the origin-insertion path's length less the wrapped path's cable (``wrap_cable``):
         the length of the FE body between its end faces. The insertion turns about the hinge:
-        I' = k x (I - c), I'' = k x I'. A wrapped path (SPEC 3.3, :mod:`persival.model.wrapping`)
+        I' = k x (I - c), I'' = k x I'. A wrapped path (docs/theory.md 3.4, :mod:`persival.model.wrapping`)
         gains r per radian while it wraps.
         """
         insertion = self.forearm_point(muscle.insertion, theta_deg)

@@ -5,7 +5,7 @@ five muscles (geometry, tissue layout, fibre prestretch, bulk moduli) and mesh p
 Coordinates in mm. Upper-arm points are in the fixed humerus frame; forearm points are given
 in the forearm frame at theta = 0 (full extension, forearm hanging along -z) and rotate about
 the hinge axis with the elbow angle (flexion positive). A muscle may take its shape from a surface
-file (SPEC 3.4, persival.model.surface_import); its path is resolved against the model file's
+file (docs/own_anatomy.md, persival.model.surface_import); its path is resolved against the model file's
 folder and its content is part of the model's hash.
 """
 
@@ -145,7 +145,7 @@ class Muscle(_Strict):
     transition_length: float = Field(gt=0, description="muscle-tendon blend zone (mm)")
     fibre_prestretch: float = Field(1.0, gt=0.5, lt=2.0)
     bulk_modulus: tuple[float, float] = Field((100.0, 1000.0), description="muscle, tendon (MPa)")
-    # Own anatomy (SPEC 3.4, docs/own_anatomy.md): the muscle's shape from a closed surface
+    # Own anatomy (docs/own_anatomy.md): the muscle's shape from a closed surface
     # instead of the swept solid; belly_radius and bow then play no part.
     surface: str | None = Field(None, description="surface file (STL, OBJ, PLY, VTK, VTP), relative to the model file")
     surface_units: Literal["mm", "cm", "m"] = "mm"

@@ -31,7 +31,7 @@ REGIONS = {0: "tendon", 1: "muscle-tendon blend", 2: "belly"}
 
 def tissue_regions(muscle: Muscle, position: np.ndarray, length: float) -> tuple[np.ndarray, np.ndarray]:
     """Muscle fraction gamma_M and region code (REGIONS) of cells at ``position`` (0..1) along the
-    muscle's ``length`` mm: the built-in tissue layout (SPEC 3.1 mixture, tendon and transition lengths)."""
+    muscle's ``length`` mm: the built-in tissue layout (docs/theory.md 1.5 mixture, tendon and transition lengths)."""
     _, gamma = muscle_profile(muscle, np.asarray(position, dtype=float), length)
     region = np.where(gamma <= 0.0, 0, np.where(gamma >= 1.0, 2, 1))
     return gamma, region

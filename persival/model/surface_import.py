@@ -1,4 +1,4 @@
-"""A muscle's own surface: read, converted to mm, repaired and placed in the arm frame (SPEC 3.4).
+"""A muscle's own surface: read, converted to mm, repaired and placed in the arm frame (docs/own_anatomy.md).
 
 The model file names the surface (STL, OBJ, PLY, VTK or VTP), its units and two points in the
 surface's own coordinates near its ends, ``origin_point`` and ``insertion_point``. The surface

@@ -1,6 +1,6 @@
 """One muscle from its own surface: the placed surface meshed, its attachment faces and its fibres.
 
-The steps (SPEC 3.4, docs/own_anatomy.md): the repaired, placed surface
+The steps (docs/own_anatomy.md): the repaired, placed surface
 (persival.model.surface_import) is meshed with tet10 (persival.model.surface_mesh); the two
 attachment faces are the patches of its boundary around the placed origin and insertion points;
 they are the end regions of the Laplace problem that gives the fibres and the position along the

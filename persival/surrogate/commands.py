@@ -251,7 +251,7 @@ def _loads(text: str) -> list[float]:
 def _register_motion(app: typer.Typer) -> typer.Typer:
     """`persival motion --table ...` builds the model; its subcommands (`motion play`, from the
     deploy stage) use an export. Returns the group for them."""
-    motion_app = typer.Typer(cls=FullHelpGroup, help="The motion-and-load activation model (SPEC 5): build it from a "
+    motion_app = typer.Typer(cls=FullHelpGroup, help="The motion-and-load activation model (docs/theory.md 6.4): build it from a "
                              "moment table (options below), or play a recorded movement (motion play).")
     app.add_typer(motion_app, name="motion")
 
