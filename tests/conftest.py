@@ -11,11 +11,14 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from pathlib import Path
 
 import pytest
 
 SEED_CACHE = Path(__file__).parent / "data" / "state_cache"
+# the tests' shared helpers (surface_files.py) import from any test folder
+sys.path.insert(0, str(Path(__file__).parent))
 
 
 def pytest_configure(config):

@@ -206,7 +206,7 @@ def workdir(tmp_path_factory):
     run_campaign(root / "random.zarr", Design.random(3, seed=0), SimulatorSpec("analytic", {}), scheduler=INLINE, progress=False)
     _bad_surfaces(root)
     # recordings for `motion play`, and an export whose reachable range ends below 150 deg
-    from test_server import build_contract_export
+    from deploy.test_server import build_contract_export
 
     build_contract_export(root / "export")
     (root / "noangle.csv").write_text("time_s,shoulder_deg\n0,10\n1,20\n")

@@ -19,7 +19,7 @@ from persival.model.arm_file import load_model_file
 from persival.tables.moment_table import MomentTable, TableMismatchError, build_moment_table
 from persival.vocabulary import MUSCLES
 
-FIXTURE = Path(__file__).parent / "data" / "moments_coarse.npz"
+FIXTURE = Path(__file__).parents[1] / "data" / "moments_coarse.npz"
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ from persival.surrogate.motion_model import MotionActivationModel, _moments_at, 
 from persival.tables.moment_table import MomentTable
 from persival.vocabulary import MUSCLES
 
-FIXTURE = Path(__file__).parent / "data" / "moments_coarse.npz"
+FIXTURE = Path(__file__).parents[1] / "data" / "moments_coarse.npz"
 FLEXORS = slice(0, 3)
 
 

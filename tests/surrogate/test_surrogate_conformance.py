@@ -14,7 +14,7 @@ import pytest
 
 from persival.surrogate.base import KINDS, MANIFEST, NotFittedError, Surrogate, load_surrogate
 
-FIXTURE = Path(__file__).parent / "data" / "response_table_coarse"
+FIXTURE = Path(__file__).parents[1] / "data" / "response_table_coarse"
 
 
 def _coarse_dataset():

@@ -25,7 +25,7 @@ from persival.tables.response_table import ResponseTable, build_response_table
 from persival.tables.table_solve import OutsideTableError, TableSolver
 from persival.vocabulary import MUSCLES
 
-FIXTURE = Path(__file__).parent / "data" / "response_table_coarse"
+FIXTURE = Path(__file__).parents[1] / "data" / "response_table_coarse"
 
 
 @pytest.fixture(scope="module")

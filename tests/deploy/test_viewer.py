@@ -21,7 +21,7 @@ from test_server import LiveServer, export_dir  # noqa: F401  (the one export fi
 
 from persival.deploy.server import WEB_DIST
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "tests" / "viewer" / "viewer_check.mjs"
 CHROMIUM = os.environ.get("CHROMIUM", "/usr/bin/chromium")
 ALPHAS = [[0.0, 0.0, 0.0, 0.0, 0.0], [0.3, 0.7, 0.1, 0.9, 0.5], [1.0, 1.0, 1.0, 1.0, 1.0]]

@@ -19,8 +19,8 @@ def _fixture_path() -> Path | None:
     candidates = []
     if os.environ.get("PERSIVAL_FIXTURES"):
         candidates.append(Path(os.environ["PERSIVAL_FIXTURES"]) / FIXTURE_NAME)
-    candidates.append(Path(__file__).parent / "data" / FIXTURE_NAME)  # a copy kept with the tests
-    candidates.append(Path(__file__).parents[1] / ".." / "shared" / "fixtures" / FIXTURE_NAME)
+    candidates.append(Path(__file__).parents[1] / "data" / FIXTURE_NAME)  # a copy kept with the tests
+    candidates.append(Path(__file__).parents[2] / ".." / "shared" / "fixtures" / FIXTURE_NAME)
     for c in candidates:
         if c.is_file():
             return c

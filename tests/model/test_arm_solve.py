@@ -23,7 +23,7 @@ from persival.tables.moment_table import TableMismatchError
 from persival.tables.response_table import ResponseTable
 from persival.tables.table_solve import TableSolver
 
-FIXTURE = Path(__file__).parent / "data" / "response_table_coarse"
+FIXTURE = Path(__file__).parents[1] / "data" / "response_table_coarse"
 
 
 @pytest.fixture(scope="module")

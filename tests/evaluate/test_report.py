@@ -19,7 +19,7 @@ import pytest
 from test_evaluate import TABLES, evaluated, tiny_run  # noqa: F401  (the session's run)
 from typer.testing import CliRunner
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 WEB = ROOT / "persival" / "deploy" / "web"
 CHROMIUM = os.environ.get("CHROMIUM", "/usr/bin/chromium")
 

@@ -17,7 +17,7 @@ import torch
 from persival.surrogate.structured.moment_model import ExternalMoments, MomentModel
 from persival.vocabulary import MUSCLES
 
-FIXTURE = Path(__file__).parent / "data" / "response_table_coarse"
+FIXTURE = Path(__file__).parents[1] / "data" / "response_table_coarse"
 
 
 @pytest.fixture(scope="module")
