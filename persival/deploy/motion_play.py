@@ -3,12 +3,13 @@
 Per frame of the prepared recording (:mod:`persival.deploy.recording`): the motion-and-load
 model's activations for (angle, velocity, acceleration, load), whether the muscles can produce
 the required moment (its ``moment_deficit_Nmm`` output is zero), and the arm drawn for the frame.
-The export's deformation model has no load input, so the drawn state is the deformation model
-at its own least-effort activations for the target angle (``activation_angle.onnx``): fed the
-loaded activations, the unloaded arm would flex further than the target (the "jump"). The
-achieved angle is that drawn state's elbow angle; its distance from the target is the model
-chain's own error (angle model -> deformation model), and the activations reported are the
-motion model's, load and inertia included.
+A deformation model without a load input is drawn at its own least-effort activations for the
+target angle (``activation_angle.onnx``): fed the loaded activations, the unloaded arm would flex
+further than the target (the "jump"). One that takes the load (``load_kg``: it solves the
+elbow's equilibrium with the load in the hand) is fed the static effort (the motion model at
+zero velocity and acceleration) and the load, and draws the loaded arm. The achieved angle is
+the drawn state's elbow angle; its distance from the target is the model chain's own error, and
+the activations reported are the motion model's, load and inertia included.
 """
 
 from __future__ import annotations
@@ -52,20 +53,42 @@ def _motion_outputs(model: DeployedModel, motion: PreparedMotion) -> tuple[np.nd
     return out[0].astype(np.float64), deficit.astype(np.float64)
 
 
+def _drawn_angles(model: DeployedModel, motion: PreparedMotion) -> np.ndarray:
+    """The drawn states' elbow angles (see the module docstring), in chunks of _CHUNK frames."""
+    session = model.sessions["float32"]
+    # the contract says so in metadata.json (an optional input is an initializer too, which
+    # onnxruntime does not list among the session's inputs)
+    takes_load = model.motion is not None and "load_kg" in model.metadata["models"]["deformation"].get("inputs", {})
+    if takes_load:
+        static = PreparedMotion(motion.time_s, motion.target_deg, 0 * motion.target_deg, 0 * motion.target_deg,
+                                motion.load_kg, motion.clamped, motion.sigma_s)
+        drawn = _motion_outputs(model, static)[0]
+    else:
+        drawn = model.angle.run(None, {"elbow_angle_deg": motion.target_deg[:, None].astype(np.float32)})[0]
+    drawn = np.clip(drawn, 0.0, 1.0).astype(np.float32)
+    angles = []
+    for k in range(0, len(drawn), _CHUNK):
+        feeds = {"activations": drawn[k:k + _CHUNK]}
+        if takes_load:
+            feeds["load_kg"] = motion.load_kg[k:k + _CHUNK, None].astype(np.float32)
+        angles.append(session.run(["elbow_angle_deg"], feeds)[0][:, 0])
+    return np.concatenate(angles).astype(np.float64)
+
+
 def play_motion(model: DeployedModel, motion: PreparedMotion) -> dict[str, np.ndarray]:
     """Every frame's activations, holdability, drawn state's angle (see the module docstring)."""
     if model.angle is None:
         raise ValueError("this export has no activation model (activation_angle.onnx): it cannot draw a movement")
-    static = model.angle.run(None, {"elbow_angle_deg": motion.target_deg[:, None].astype(np.float32)})[0]
+    if not model.has_angle:
+        raise ValueError("this export's deformation model has no elbow-angle output: it cannot draw a movement")
     if model.motion is not None:
         activations, deficit = _motion_outputs(model, motion)
     elif (motion.load_kg > 0).any():
         raise ValueError("a load needs the motion-and-load model, which this export does not have")
     else:  # static least effort: no velocity, acceleration or load term
+        static = model.angle.run(None, {"elbow_angle_deg": motion.target_deg[:, None].astype(np.float32)})[0]
         activations, deficit = static.astype(np.float64), np.zeros(len(motion.time_s))
-    achieved = np.concatenate([model.predict(np.clip(static[k:k + _CHUNK], 0.0, 1.0))[1]
-                               for k in range(0, len(static), _CHUNK)]).astype(np.float64)
-    return {"time_s": motion.time_s, "target_deg": motion.target_deg, "achieved_deg": achieved,
+    return {"time_s": motion.time_s, "target_deg": motion.target_deg, "achieved_deg": _drawn_angles(model, motion),
             "activations": activations, "holds": deficit == 0.0, "deficit_Nmm": deficit, "clamped": motion.clamped,
             "velocity_deg_s": motion.velocity_deg_s, "acceleration_deg_s2": motion.acceleration_deg_s2,
             "load_kg": motion.load_kg}
@@ -93,8 +116,8 @@ def play_recording(model: DeployedModel, recording: Recording, load_kg: float | 
         "angle_error_deg": {"max": float(error.max()), "mean": float(error.mean())},
         "peak_activations": dict(zip(model.muscles, (float(v) for v in peak))),
         "models": {"motion": "activation_motion.onnx" if model.motion is not None else None,
-                   "drawn_state": "activation_angle.onnx -> " + model.metadata["models"]["deformation"]["variants"]
-                   ["float32"]["file"], "export": str(model.folder)},
+                   "deformation": model.metadata["models"]["deformation"]["variants"]["float32"]["file"],
+                   "export": str(model.folder)},
     }
     return frames, summary
 

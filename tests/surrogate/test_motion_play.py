@@ -163,3 +163,47 @@ def test_mot_without_endheader_and_no_frame_in_range(tmp_path):
     t, angle = _cycle(150.0, 170.0)
     with pytest.raises(ValueError, match="no frame lies inside the model's reachable range 10.0 to 140.0"):
         prepare(read_recording(_write_mot(tmp_path / "far.mot", t, angle)), (10.0, 140.0))
+
+
+def _with_load_input(export: Path, folder: Path, kg_to_deg: float = -3.0) -> Path:
+    """A copy of the export whose deformation graph takes `load_kg` (as a model that solves the
+    elbow's equilibrium with the load does): here its angle simply shifts by kg_to_deg per kg."""
+    import shutil
+
+    import onnx
+    from onnx import TensorProto, helper, numpy_helper
+
+    shutil.copytree(export, folder)
+    model = onnx.load(folder / "deformation.onnx")
+    graph = model.graph
+    for node in graph.node:
+        node.output[:] = ["angle_unloaded" if o == "elbow_angle_deg" else o for o in node.output]
+    graph.input.append(helper.make_tensor_value_info("load_kg", TensorProto.FLOAT, ["batch", 1]))
+    # optional, as the exported structured model's: an initializer of the input's name is its default (0 kg)
+    graph.initializer.extend([numpy_helper.from_array(np.zeros((1, 1), np.float32), "load_kg"),
+                              numpy_helper.from_array(np.array([[kg_to_deg]], np.float32), "kg_to_deg")])
+    graph.node.extend([helper.make_node("Mul", ["load_kg", "kg_to_deg"], ["shift"], name="load_shift"),
+                       helper.make_node("Add", ["angle_unloaded", "shift"], ["elbow_angle_deg"], name="load_add")])
+    onnx.save(model, folder / "deformation.onnx")
+    meta = json.loads((folder / "metadata.json").read_text())
+    meta["models"]["deformation"]["inputs"]["load_kg"] = [None, 1]
+    meta["models"]["deformation"]["variants"] = {"float32": meta["models"]["deformation"]["variants"]["float32"]}
+    (folder / "metadata.json").write_text(json.dumps(meta))
+    return folder
+
+
+def test_a_deformation_model_that_takes_the_load_draws_the_loaded_arm(motion_export, tmp_path):
+    import onnxruntime as ort
+
+    export = _with_load_input(motion_export, tmp_path / "export")
+    t, angle = _cycle(40.0, 100.0)
+    table, summary, _ = _play(tmp_path, export, _write_csv(tmp_path / "rec.csv", t, angle), "--load", "2")
+    # drawn: the static effort (motion model at zero velocity and acceleration, 2 kg) and the load
+    motion = ort.InferenceSession(str(export / "activation_motion.onnx"), providers=["CPUExecutionProvider"])
+    rows = np.column_stack([table["target_deg"], 0 * table["target_deg"], 0 * table["target_deg"],
+                            np.full(len(table), 2.0)]).astype(np.float32)
+    static = np.clip(motion.run(["activations"], {"motion": rows})[0], 0, 1)
+    original = ort.InferenceSession(str(motion_export / "deformation.onnx"), providers=["CPUExecutionProvider"])
+    expected = original.run(["elbow_angle_deg"], {"activations": static})[0][:, 0] - 6.0
+    assert np.abs(table["achieved_deg"] - expected).max() < 2e-3
+    assert summary["models"]["deformation"] == "deformation.onnx"

@@ -22,6 +22,7 @@ export class LocalEngine {
     this.meta = meta;
     this.sessions = new Map();
     this.input = new Float32Array(5);
+    this.takesLoad = false; // set by loadInput()
   }
 
   async session(file) {
@@ -29,6 +30,7 @@ export class LocalEngine {
       const bytes = await fetchBytes(`artifacts/${file}`);
       this.sessions.set(file, await ort.InferenceSession.create(bytes, {
         executionProviders: ['wasm'], graphOptimizationLevel: 'all',
+        logSeverityLevel: 3, // errors only: an optional input backed by an initializer draws a warning at every load
       }));
     }
     return this.sessions.get(file);
@@ -36,10 +38,22 @@ export class LocalEngine {
 
   variantFile(tier) { return this.meta.models.deformation.variants[tier].file; }
 
-  async deform(activations, tier = 'float32') {
+  // Whether the float32 deformation graph can be fed `load_kg`: onnxruntime-web accepts only the
+  // graph's true inputs, so an optional input backed by an initializer (0 kg) cannot be fed here.
+  async loadInput() {
+    if (!('load_kg' in (this.meta.models.deformation.inputs || {}))) return false;
+    this.takesLoad = (await this.session(this.variantFile('float32'))).inputNames.includes('load_kg');
+    return this.takesLoad;
+  }
+
+  // load (kg): fed to a deformation graph that takes it (`load_kg`, a model that solves the
+  // elbow's equilibrium with the load in the hand); other graphs have no such input.
+  async deform(activations, tier = 'float32', load = 0) {
     const s = await this.session(this.variantFile(tier));
     this.input.set(activations);
-    const out = await s.run({ activations: new ort.Tensor('float32', this.input, [1, 5]) });
+    const feeds = { activations: new ort.Tensor('float32', this.input, [1, 5]) };
+    if (this.takesLoad && tier === 'float32') feeds.load_kg = new ort.Tensor('float32', new Float32Array([load]), [1, 1]);
+    const out = await s.run(feeds);
     const angle = out.elbow_angle_deg ? out.elbow_angle_deg.data[0] : NaN; // optional output
     return { positions: out.positions.data, angle, activations: this.input };
   }

@@ -7,7 +7,9 @@
 // sliders, the activation colours and the graphs show it). The *drawn* state is the deformation
 // model at its own least-effort activations for the same angle (activation_angle.onnx): the
 // deformation model has no load input, and fed the loaded activations the unloaded arm would flex
-// past the target (the 143-degree jump of a 2 kg load at 90 degrees). The drawn state's elbow
+// past the target (the 143-degree jump of a 2 kg load at 90 degrees). A deformation model that
+// takes the load (`load_kg`: it solves the elbow's equilibrium with the load in the hand) is fed
+// the static effort and the load instead, and draws the loaded arm. The drawn state's elbow
 // angle is the "achieved" angle; a load the muscles cannot hold at an angle is refused.
 import { ArmScene } from './scene.js';
 import { LocalEngine, ServerEngine, configureOrt } from './inference.js';
@@ -35,6 +37,8 @@ class Viewer {
     // The angle controls need the activation model; without it only the sliders drive the arm.
     this.hasAngleModel = Boolean(this.meta.models.activation_angle);
     this.hasMotion = Boolean(this.meta.models.activation_motion);
+    // a deformation model with a load input draws the loaded arm itself (see drawnFor)
+    this.loadInput = this.hasMotion && await this.local.loadInput();
     this.range = this.angleRange();
     this.tiers = Object.keys(this.meta.models.deformation.variants);
     this.state = { activations: new Float32Array(5), driver: 'activations', angle: this.range[0], load: 0 };
@@ -200,13 +204,20 @@ class Viewer {
       rows.push([lo + amp * (1 - Math.cos(p)), amp * w * Math.sin(p), amp * w * w * Math.cos(p), this.state.load]);
     }
     const angles = rows.map((r) => r[0]);
-    const drawn = await this.local.angleBatch(angles);
+    const drawn = await this.drawnFor(angles, rows.map((r) => r[3]));
     const effort = this.hasMotion ? await this.local.motionBatch(rows) : drawn;
     this.table = { load: this.state.load, angles, drawn, effort, span: [lo, hi] };
     return this.table;
   }
 
-  // {drawn, effort, frame?} for the state to draw now.
+  // The drawn states' activations for target angles (and loads): the angle model's, or with a
+  // load-taking deformation model the static effort (zero velocity and acceleration) with the load.
+  async drawnFor(angles, loads) {
+    if (!this.loadInput) return this.local.angleBatch(angles);
+    return this.local.motionBatch(angles.map((a, k) => [a, 0, 0, loads[k]]));
+  }
+
+  // {drawn, effort, load, k?, target?} for the state to draw now.
   async activationsForState() {
     const s = this.state;
     if (this.player.playing) {
@@ -223,14 +234,14 @@ class Viewer {
         this.playEffort[j] = t.effort[5 * k + j] * (1 - f) + t.effort[5 * k1 + j] * f;
       }
       s.angle = t.angles[k] * (1 - f) + t.angles[k1] * f;
-      return { drawn: this.playDrawn, effort: this.playEffort };
+      return { drawn: this.playDrawn, effort: this.playEffort, load: s.load };
     }
     if (s.driver === 'angle') {
-      const drawn = await this.local.activationsForAngle(s.angle);
-      const effort = this.hasMotion ? await this.local.activationsForMotion(s.angle, 0, 0, s.load) : drawn;
-      return { drawn, effort };
+      const effort = this.hasMotion ? await this.local.activationsForMotion(s.angle, 0, 0, s.load) : null;
+      const drawn = this.loadInput ? effort : await this.local.activationsForAngle(s.angle);
+      return { drawn, effort: effort ?? drawn, load: s.load };
     }
-    return { drawn: s.activations, effort: s.activations };
+    return { drawn: s.activations, effort: s.activations, load: 0 };
   }
 
   // Where a frame's time goes, measured on this thread (performance.now): per state the lookup of
@@ -254,7 +265,9 @@ class Viewer {
     const ta = performance.now();
     const next = await this.activationsForState();
     const t0 = performance.now();
-    const r = await (this.place === 'wasm' ? this.local : this.server).deform(next.drawn, this.tier);
+    // the server's deformation is fed activations only: a loaded state of a load-taking model is computed here
+    const local = this.place === 'wasm' || (this.loadInput && next.load > 0);
+    const r = await (local ? this.local : this.server).deform(next.drawn, local && this.loadInput ? 'float32' : this.tier, next.load);
     const ms = performance.now() - t0;
     this.prof.activationsMs += t0 - ta;
     this.prof.inferenceMs += ms;

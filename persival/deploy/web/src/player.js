@@ -1,7 +1,7 @@
 // A recorded movement played at its own speed: the file is read and prepared as `persival motion
 // play` does (recording.js), the motion-and-load model gives every frame's activations in one
-// batched run, the angle model the drawn arm's activations; each drawn frame records the achieved
-// elbow angle and extends the live graphs.
+// batched run, the angle model (or the static effort: main.js, drawnFor) the drawn arm's; each
+// drawn frame records the achieved elbow angle and extends the live graphs.
 import { parseRecording, prepareRecording, RATE_HZ } from './recording.js';
 
 export class RecordingPlayer {
@@ -19,7 +19,7 @@ export class RecordingPlayer {
     const parsed = parseRecording(text, name, column);
     const rec = prepareRecording(parsed, v.range, parsed.load ? null : v.state.load);
     const n = rec.time.length;
-    rec.drawn = await v.local.angleBatch(Array.from(rec.target));
+    rec.drawn = await v.drawnFor(Array.from(rec.target), Array.from(rec.load));
     rec.effort = rec.drawn;
     let deficit = null;
     if (v.hasMotion) {
@@ -64,7 +64,8 @@ export class RecordingPlayer {
       this.drawn[j] = rec.drawn[5 * k + j] * (1 - f) + rec.drawn[5 * k1 + j] * f;
       this.effort[j] = rec.effort[5 * k + j] * (1 - f) + rec.effort[5 * k1 + j] * f;
     }
-    return { drawn: this.drawn, effort: this.effort, k, target: rec.target[k] * (1 - f) + rec.target[k1] * f };
+    return { drawn: this.drawn, effort: this.effort, k, target: rec.target[k] * (1 - f) + rec.target[k1] * f,
+      load: rec.load[k] * (1 - f) + rec.load[k1] * f };
   }
 
   // The drawn state of frame k reached `angle`: fill the achieved curve up to k (frames skipped
