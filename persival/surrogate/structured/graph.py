@@ -50,10 +50,14 @@ class StructuredGraph(torch.nn.Module):
         self.interval_start = as_t(basis.breaks[:-1, None])
         self.interval_rows = as_t(np.transpose(basis.coefficients, (1, 0, 2)).reshape(n_int, 4 * n_t2))
         self.weight_rows = as_t(basis.coefficients.reshape(4 * n_int, n_t2))  # power-major, as torch_weights
-        # shapes: every muscle's coefficient data side by side, (2 n_t, n_a * R)
-        data = np.concatenate([s.coefficient_data for s in shapes], axis=2)
+        # shapes: every muscle's coefficient data side by side, (2 n_t, n_a * R), each followed by a
+        # constant coefficient 1 (value 1, slope 0: the weights reproduce constants) that carries the
+        # muscle's mean surface and the homogeneous coordinate of its affine turn (below)
+        one = np.zeros((n_t2, n_a, 1))
+        one[: n_t2 // 2] = 1.0
+        data = np.concatenate([np.concatenate([s.coefficient_data, one], axis=2) for s in shapes], axis=2)
         self.coefficient_rows = as_t(data.reshape(n_t2, -1))
-        counts = [s.modes.shape[0] for s in shapes]
+        counts = [s.modes.shape[0] + 1 for s in shapes]
         expand = np.zeros((5, sum(counts)))
         ends = np.cumsum(counts)
         for s, end, r in zip(shapes, ends, counts):
@@ -68,15 +72,27 @@ class StructuredGraph(torch.nn.Module):
         for i, s in enumerate(shapes):
             self.register_buffer(f"modes_{i}", torch.as_tensor(s.modes, dtype=mode_dtype))
         self.n_muscles = len(shapes)
-        self.offsets = [as_t(s.mean.reshape(-1, 3) - s.origin) for s in shapes]
-        self.origins = [as_t(s.origin) for s in shapes]
-        # Q(theta)^T entries of every muscle: (2 n_t, 9 n_m)
-        self.rotation_rows = as_t(np.concatenate([s.rotation_data.reshape(-1, 3, 3).transpose(0, 2, 1).reshape(-1, 9)
-                                                  for s in shapes], axis=1))
+        for i, s in enumerate(shapes):  # float32 storage: the mean surfaces are hundreds of mm
+            self.register_buffer(f"means_{i}", torch.as_tensor(s.mean.reshape(-1, 3) - s.origin, dtype=dtype))
+        # the affine turn of every muscle, [Q(theta)^T; O] (4 x 3) in homogeneous coordinates, as
+        # Hermite data: (2 n_t, 12 n_m) (O's slopes are 0)
+        affine = []
+        for s in shapes:
+            q = s.rotation_data.reshape(-1, 3, 3).transpose(0, 2, 1)
+            o = np.zeros((len(q), 1, 3))
+            o[: len(q) // 2] = s.origin
+            affine.append(np.concatenate([q, o], axis=1).reshape(len(q), 12))
+        self.affine_rows = as_t(np.concatenate(affine, axis=1))
 
-    @property
-    def modes(self) -> list:
-        return [getattr(self, f"modes_{i}") for i in range(self.n_muscles)]
+    def _surface_rows(self, i: int, dtype) -> torch.Tensor:
+        """Muscle i's (r + 1, 4 n) rows: its modes and mean surface in homogeneous coordinates
+        (x, y, z, 0) and (x, y, z, 1). Built from the stored tensors by operators on constants only,
+        which the runtime folds once when it loads the graph."""
+        modes, mean = getattr(self, f"modes_{i}").to(dtype), getattr(self, f"means_{i}")
+        r, n = modes.shape[0], mean.shape[0]
+        modes = torch.nn.functional.pad(modes.reshape(r, n, 3), (0, 1)).reshape(r, 4 * n)  # pads, not stored zeros
+        mean = torch.nn.functional.pad(mean, (0, 1), value=1.0).reshape(1, 4 * n)
+        return torch.cat([modes, mean], dim=0)
 
     def _bracket(self, g):
         """One-hot (b, n_g - 1) of the scan interval holding the stable root nearest the hanging
@@ -116,8 +132,7 @@ class StructuredGraph(torch.nn.Module):
         w = torch.cat([interval * (t2 * t), interval * t2, interval * t, interval], dim=1) @ self.weight_rows  # (b, 2 n_t)
         by_level = act_w.reshape(-1, 5, self.n_levels).transpose(1, 2) @ self.expand  # (b, n_a, R)
         coefficients = ((w @ self.coefficient_rows).reshape(-1, self.n_levels, self.n_coefficients) * by_level).sum(1)
-        rotations = (w @ self.rotation_rows).reshape(-1, self.n_muscles, 3, 3)
-        surfaces = [((coefficients[:, lo:hi] @ modes.to(coefficients.dtype)).reshape(-1, n, 3) + offset) @ rotations[:, i]
-                    + origin for i, ((lo, hi), n, modes, offset, origin) in enumerate(
-                        zip(self.slices, self.node_counts, self.modes, self.offsets, self.origins))]
+        affine = (w @ self.affine_rows).reshape(-1, self.n_muscles, 4, 3)
+        surfaces = [(coefficients[:, lo:hi] @ self._surface_rows(i, w.dtype)).reshape(-1, n, 4) @ affine[:, i]
+                    for i, ((lo, hi), n) in enumerate(zip(self.slices, self.node_counts))]
         return torch.cat(surfaces, dim=1), theta
