@@ -313,7 +313,7 @@ def bone_shapes(spec) -> dict[str, tuple[np.ndarray, np.ndarray]]:
                 return {b.name: (data[f"{b.name}/points"], data[f"{b.name}/triangles"]) for b in spec.bones}
         except (OSError, ValueError, KeyError):
             pass  # unreadable: built again and overwritten
-    shapes = _shapes(spec.model_dump_json())
+    shapes = _shapes(spec.model_dump_json(exclude_unset=True))
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.writing.npz")
     np.savez(tmp, **{f"{n}/{part}": a for n, arrays in shapes.items() for part, a in zip(("points", "triangles"), arrays)})
