@@ -241,6 +241,7 @@ def test_every_subcommand_has_a_bad_input():
     assert not missing, f"add a bad-input case to tests/test_cli_errors.py for: {sorted(missing)}"
 
 
+@pytest.mark.slow
 def test_bad_inputs_are_one_line_errors_and_leave_nothing(workdir, monkeypatch, capsys):
     monkeypatch.chdir(workdir)
     runner = CliRunner()

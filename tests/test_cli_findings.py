@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 import typer
 from rich.console import Console
 from typer.testing import CliRunner
@@ -15,6 +16,7 @@ from persival.evaluate.bench_nn import BENCH_COLUMNS, TERMINAL_COLUMNS
 from persival.evaluate.tables import make_table, to_rich
 
 
+@pytest.mark.slow
 def test_accuracy_of_an_all_muscle_sg(tmp_path):
     """`persival accuracy --surrogate sg=...` on the SG of all five muscles (the run's `sg/`)."""
     from persival.campaign.design import Design

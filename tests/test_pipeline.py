@@ -3,9 +3,12 @@ its stage.json, a second run skips them all, and a changed setting reruns only w
 
 import json
 
+import pytest
+
 from persival.pipeline import STAGES, RunConfig, run
 
 
+@pytest.mark.slow
 def test_run_end_to_end_resumes_stage_by_stage(tmp_path):
     from rich.console import Console
 

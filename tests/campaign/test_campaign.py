@@ -110,6 +110,7 @@ def test_design_rejects_bad_ids_and_files(tmp_path):
 
 
 # ---- end to end: level-1 sparse grid, LocalCluster vs in-process ------------------------------
+@pytest.mark.slow
 def test_level1_campaign_on_local_cluster_equals_in_process(tmp_path):
     design = Design.sparse_grid(1)
     inline = run_campaign(tmp_path / "inline.zarr", design, ANALYTIC, scheduler="inline",
@@ -156,6 +157,7 @@ if __name__ == "__main__":
 """
 
 
+@pytest.mark.slow
 def test_killed_campaign_resumes_with_every_state_once(tmp_path):
     store_path = tmp_path / "killed.zarr"
     script = tmp_path / "driver.py"
@@ -485,6 +487,7 @@ class GilHoggingSimulator(FlakySimulator):
         return super().simulate(activations, warm_start, attempt)
 
 
+@pytest.mark.slow
 def test_hung_and_unresponsive_workers_on_dask(tmp_path, monkeypatch):
     from persival.campaign import runner
 

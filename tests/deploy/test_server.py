@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.slow  # a shared fixture of this module takes minutes (make test-fast skips it)
+
 N_STATES = 48
 
 

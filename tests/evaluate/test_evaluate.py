@@ -20,6 +20,8 @@ from typer.testing import CliRunner
 from persival.evaluate.accuracy_tables import StoppingRule, draw_until_stable
 from persival.evaluate.prototypes import SHAPES, dense_parameters, prototype_widths
 
+pytestmark = pytest.mark.slow  # a shared fixture of this module takes minutes (make test-fast skips it)
+
 TABLES = ("in_training", "random_activations", "random_angles", "error_propagation", "prototypes")
 # tests/test_report.py imports the fixtures below, which makes pytest hold a second copy of each:
 # this cache lets both copies share one run per session

@@ -28,6 +28,8 @@ import { createRequire } from 'node:module';
 import { mkdtempSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
+
+pytestmark = pytest.mark.slow  # a shared fixture of this module takes minutes (make test-fast skips it)
 const [webPackage, url, shot] = process.argv.slice(2);
 const { chromium } = createRequire(webPackage)('playwright-core');
 const profile = mkdtempSync(join(tmpdir(), 'persival-report-'));

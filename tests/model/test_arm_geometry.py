@@ -12,6 +12,7 @@ def simulator():
     return ArmSimulator(profile="quick", method="direct")  # geometry only: no response tables needed
 
 
+@pytest.mark.slow
 def test_reference_surfaces_are_closed_and_outward(simulator):
     reference = simulator.reference()
     assert list(reference.surfaces) == list(MUSCLES)

@@ -23,6 +23,8 @@ from persival.tables.moment_table import TableMismatchError
 from persival.tables.response_table import ResponseTable
 from persival.tables.table_solve import TableSolver
 
+pytestmark = pytest.mark.slow  # a shared fixture of this module takes minutes (make test-fast skips it)
+
 FIXTURE = Path(__file__).parents[1] / "data" / "response_table_coarse"
 
 

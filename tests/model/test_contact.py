@@ -47,6 +47,7 @@ def pressed_block(obstacle, pressure, penalty, contact_points="on_faces"):
 
 
 @pytest.mark.parametrize("contact_points", ["on_faces", "at_nodes"])
+@pytest.mark.slow
 def test_contact_patch_test(contact_points, capsys):
     """Block on a rigid plane: the contact force carries the load; the penetration is p / eps.
 
@@ -108,6 +109,7 @@ def test_contact_tangent_matches_finite_differences(contact_points):
     assert err_K < 1e-7 and err_f < 1e-7
 
 
+@pytest.mark.slow
 def test_newton_converges_quadratically_once_the_active_set_is_fixed(capsys):
     """Full Newton (no line search) on a block pressed onto a curved cylinder: once the set of
     penetrating points stops changing, each iteration squares the residual."""
@@ -160,6 +162,7 @@ def wrapped_muscle(rho, beta_deg, tendon_radius, mesh_size=5.0):
     return mesh, MaterialField.from_cells(4, mesh.cell_data["fibre"], gamma, k, 1.0), tangent
 
 
+@pytest.mark.slow
 def test_muscle_wrapped_over_a_bone_keeps_its_moment_arm(capsys):
     """An activated muscle meshed wrapped 60 deg around a rigid cylinder (a distal humerus of
     radius 8 mm on the hinge axis), its insertion pulled 2 mm along its tendon. Without the
@@ -252,6 +255,7 @@ def wrapped_unit(with_bone: bool, activation_mesh_deg: float = 0.0, tie: str = "
     return MuscleUnit("biceps", mesh, material, path, SolverOptions(atol=1e-8)), R + r_t
 
 
+@pytest.mark.slow
 def test_muscle_unit_moment_with_contact_is_the_work_on_its_faces(capsys):
     """The unit's moment -(T L' + dPi_c/dtheta) (envelope theorem, persival.model.muscle_unit)
     equals the virtual work of its end faces' reactions in the world frame, computed without
@@ -288,6 +292,7 @@ def test_muscle_unit_moment_with_contact_is_the_work_on_its_faces(capsys):
     assert np.abs(state.sensitivity - du).max() < 2e-3 * np.abs(du).max()
 
 
+@pytest.mark.slow
 def test_muscle_unit_over_the_trochlea_keeps_its_moment_arm(capsys):
     """Stretched by extending the elbow, the muscle without its bone straightens through the hinge
     region and its line of action crosses the hinge (the moment turns extending); on the bone it
@@ -309,6 +314,7 @@ def test_muscle_unit_over_the_trochlea_keeps_its_moment_arm(capsys):
 
 
 @pytest.mark.parametrize("with_bone", [False, True])
+@pytest.mark.slow
 def test_forearm_tied_unit_moment_is_the_face_reaction_about_the_hinge(with_bone, capsys):
     """Insertion face rigid with the forearm (SPEC 3.3 read literally): the unit solves in the world
     frame, its face turns with theta about the hinge, and its moment is the hinge moment of the
@@ -355,6 +361,7 @@ def test_forearm_tied_unit_moment_is_the_face_reaction_about_the_hinge(with_bone
     assert error.max() < (5e-3 if with_bone else 2e-3) * np.abs(du).max()
 
 
+@pytest.mark.slow
 def test_variant_biceps_lies_on_the_humerus_at_150_deg(capsys):
     """The shipped variant (persival/model/variants/biceps_on_humerus.toml, coarse mesh): its fully
     active biceps, tied to the forearm and pressed on the humerus, at 150 deg stays outside the

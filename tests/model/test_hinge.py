@@ -47,6 +47,7 @@ def make_hinge(lever, **kwargs):
     return Hinge("lever", ends, [0, 0, 0], [1, 0, 0], MESH_ANGLE, muscle_lines=lines, **kwargs)
 
 
+@pytest.mark.slow
 def test_free_hinge_reaches_moment_equilibrium(lever, capsys):
     mesh, material, _, _ = lever
     hinge = make_hinge(lever, start_deg=MESH_ANGLE, free=True, external_moment=external)

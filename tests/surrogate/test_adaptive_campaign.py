@@ -40,6 +40,7 @@ def _all_states(stores):
     return np.concatenate(points), np.concatenate(positions)
 
 
+@pytest.mark.slow
 def test_adaptive_solves_every_point_once_interpolates_and_resumes(tmp_path):
     logs = []
     result = run_adaptive_campaign(tmp_path / "ad", SPEC, max_points=243, progress=False, log=logs.append)
@@ -65,6 +66,7 @@ def test_adaptive_solves_every_point_once_interpolates_and_resumes(tmp_path):
     assert np.array_equal(again.surrogate.grid.points, grid.points)
 
 
+@pytest.mark.slow
 def test_seed_store_states_are_reused_and_a_foreign_model_is_refused(campaigns, tmp_path):
     result = run_adaptive_campaign(tmp_path / "ad", SPEC, max_points=243, seed_stores=[campaigns / "l1.zarr"],
                                    progress=False)
@@ -151,6 +153,7 @@ def test_metrics_by_hand():
         state_errors(bad, ref, u)
 
 
+@pytest.mark.slow
 def test_adapt_command_stops_on_tolerance_and_rejects_bad_input(tmp_path):
     from persival.surrogate import commands
 

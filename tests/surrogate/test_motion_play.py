@@ -66,6 +66,7 @@ def _chain_angle(export, target):
     return deform.run(["elbow_angle_deg"], {"activations": np.clip(a, 0, 1)})[0][:, 0]
 
 
+@pytest.mark.slow
 def test_csv_recording_with_a_load(motion_export, tmp_path):
     from persival.model.arm_file import load_model_file
     from persival.surrogate.motion_model import MotionActivationModel

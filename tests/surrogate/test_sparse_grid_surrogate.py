@@ -16,6 +16,7 @@ def store(tmp_path_factory):
     return path
 
 
+@pytest.mark.slow
 def test_interpolates_the_stored_states_and_generalizes(store, tmp_path):
     from persival.campaign.store import CampaignStore
 

@@ -14,6 +14,8 @@ import pytest
 
 from persival.surrogate.base import KINDS, MANIFEST, NotFittedError, Surrogate, load_surrogate
 
+pytestmark = pytest.mark.slow  # a shared fixture of this module takes minutes (make test-fast skips it)
+
 FIXTURE = Path(__file__).parents[1] / "data" / "response_table_coarse"
 
 

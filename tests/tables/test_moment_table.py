@@ -74,6 +74,7 @@ class _Kill(Exception):
     pass
 
 
+@pytest.mark.slow
 def test_fe_columns_resume_after_a_kill_and_agree_with_the_fixture(table, tmp_path):
     """Real FE sweeps (triceps, 60 and 80 deg, passive and active): the build is killed after
     its first column, the rerun skips it and computes only the other."""

@@ -25,6 +25,8 @@ from persival.tables.response_table import ResponseTable, build_response_table
 from persival.tables.table_solve import OutsideTableError, TableSolver
 from persival.vocabulary import MUSCLES
 
+pytestmark = pytest.mark.slow  # a shared fixture of this module takes minutes (make test-fast skips it)
+
 FIXTURE = Path(__file__).parents[1] / "data" / "response_table_coarse"
 
 
