@@ -46,6 +46,8 @@ def _onnx(module: torch.nn.Module, example, path: Path, input_name, output_names
         # The TorchScript exporter, on purpose: these graphs are plain dense layers, it needs no
         # onnxscript, and its output is what the tier checks below verify. It warns that it is legacy.
         warnings.simplefilter("ignore", DeprecationWarning)
+        # the tracer notes every strided Slice it cannot fold; the graph is checked below instead
+        warnings.filterwarnings("ignore", message="Constant folding", category=UserWarning)
         torch.onnx.export(module.eval(), examples, str(path), input_names=input_names, output_names=output_names,
                           dynamic_axes=axes, opset_version=OPSET, dynamo=False, do_constant_folding=fold)
 
