@@ -109,3 +109,29 @@ def motion_export(small_run, tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("motion_export") / "export"
     shutil.copytree(small_run / "export", folder)
     return add_motion_model(folder)
+
+
+COARSE_TABLE = Path(__file__).parent / "data" / "response_table_coarse"
+
+
+@pytest.fixture(scope="module")
+def coarse_arm():
+    """The built-in arm on the coarse mesh (meshed once per module)."""
+    from persival.model.arm import ArmModel
+
+    return ArmModel(profile="coarse")
+
+
+@pytest.fixture(scope="module")
+def coarse_table(coarse_arm):
+    """The coarse response-table fixture (tests/data/README.md), or a skip naming the mismatch
+    when the model or mesh changed since it was built."""
+    from persival.model.state_cache import mesh_fingerprint
+    from persival.tables.moment_table import TableMismatchError
+    from persival.tables.response_table import ResponseTable
+
+    try:
+        return ResponseTable.open(COARSE_TABLE, coarse_arm.model_hash, "coarse", mesh_fingerprint(coarse_arm.mesh))
+    except TableMismatchError as exc:
+        pytest.skip(f"the fixture is of another model or mesh ({exc}); rebuild it as tests/data/README.md says")
+

@@ -21,22 +21,13 @@ FIXTURE = Path(__file__).parents[1] / "data" / "response_table_coarse"
 
 
 @pytest.fixture(scope="module")
-def arm():
-    from persival.model.arm import ArmModel
-
-    return ArmModel(profile="coarse")
+def arm(coarse_arm):
+    return coarse_arm
 
 
 @pytest.fixture(scope="module")
-def table(arm):
-    from persival.model.state_cache import mesh_fingerprint
-    from persival.tables.moment_table import TableMismatchError
-    from persival.tables.response_table import ResponseTable
-
-    try:
-        return ResponseTable.open(FIXTURE, arm.model_hash, "coarse", mesh_fingerprint(arm.mesh))
-    except TableMismatchError as exc:
-        pytest.skip(f"the fixture is of another model or mesh ({exc}); rebuild it (tests/data/README.md)")
+def table(coarse_table):
+    return coarse_table
 
 
 @pytest.fixture(scope="module")

@@ -19,7 +19,6 @@ import numpy as np
 import pytest
 
 from persival.model.arm import ArmModel
-from persival.model.state_cache import mesh_fingerprint
 from persival.tables.moment_table import TableMismatchError
 from persival.tables.response_table import ResponseTable, build_response_table
 from persival.tables.table_solve import OutsideTableError, TableSolver
@@ -31,17 +30,13 @@ FIXTURE = Path(__file__).parents[1] / "data" / "response_table_coarse"
 
 
 @pytest.fixture(scope="module")
-def arm():
-    return ArmModel(profile="coarse")
+def arm(coarse_arm):
+    return coarse_arm
 
 
 @pytest.fixture(scope="module")
-def solver(arm):
-    try:
-        table = ResponseTable.open(FIXTURE, arm.model_hash, "coarse", mesh_fingerprint(arm.mesh))
-    except TableMismatchError as exc:
-        pytest.skip(f"the fixture is of another model or mesh ({exc}); rebuild it as the module docstring says")
-    return TableSolver(arm, table)
+def solver(arm, coarse_table):
+    return TableSolver(arm, coarse_table)
 
 
 @pytest.mark.slow
