@@ -31,7 +31,8 @@ missing = [what for what, ok in [("chromium (apt-get install chromium)", Path(CH
                                  ("the built viewer (make web)", (WEB_DIST / "index.html").is_file()),
                                  ("playwright-core (make web)",
                                   (WEB_DIST.parent / "node_modules" / "playwright-core").is_dir())] if not ok]
-pytestmark = pytest.mark.skipif(bool(missing), reason=f"needs {', '.join(missing)}")
+pytestmark = [pytest.mark.skipif(bool(missing), reason=f"needs {', '.join(missing)}"),
+              pytest.mark.slow]  # a real browser and the shared export: make test-fast skips it
 
 
 @pytest.fixture(scope="module")

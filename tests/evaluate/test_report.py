@@ -19,6 +19,8 @@ import pytest
 from test_evaluate import TABLES, evaluated, tiny_run  # noqa: F401  (the session's run)
 from typer.testing import CliRunner
 
+pytestmark = pytest.mark.slow  # a shared fixture of this module takes minutes (make test-fast skips it)
+
 ROOT = Path(__file__).resolve().parents[2]
 WEB = ROOT / "persival" / "deploy" / "web"
 CHROMIUM = os.environ.get("CHROMIUM", "/usr/bin/chromium")
@@ -29,7 +31,6 @@ import { mkdtempSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 
-pytestmark = pytest.mark.slow  # a shared fixture of this module takes minutes (make test-fast skips it)
 const [webPackage, url, shot] = process.argv.slice(2);
 const { chromium } = createRequire(webPackage)('playwright-core');
 const profile = mkdtempSync(join(tmpdir(), 'persival-report-'));
