@@ -41,7 +41,7 @@ class StructuredGraph(torch.nn.Module):
         self.external_row, self.load_row = as_t(moments.external_data[None]), as_t(moments.load_data[None])
         # the sign scan
         grid = moments.scan_deg
-        self.scan_weights = as_t(basis.weights(grid).T)  # (2 n_t, n_g)
+        self.scan_weights = as_t(moments.scan_weights.T)  # (2 n_t, n_g)
         self.scan_lo, self.scan_hi = as_t(grid[:-1, None]), as_t(grid[1:, None])
         self.scan_distance = as_t(np.abs(grid[:-1] - moments.near_deg))
         self.scan_index = as_t(np.arange(len(grid) - 1))

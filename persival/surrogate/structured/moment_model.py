@@ -90,6 +90,7 @@ class MomentModel:
         self.theta_basis = hermite_weights(t)
         self.activation_basis = spline_weights(self.levels)
         self.scan_deg, self.scan_interval = _scan_grid(t, ROOT_GRID_DEG)
+        self.scan_weights = self.theta_basis.weights(self.scan_deg)  # (n_g, 2 n_t): once, not per root search
 
     @classmethod
     def from_table(cls, table, spec, near_deg: float) -> MomentModel:
@@ -131,7 +132,7 @@ class MomentModel:
     def bracket(self, profile: np.ndarray) -> np.ndarray:
         """Per state the scan interval k holding the stable root nearest ``near_deg`` (g > 0 at
         its start, g <= 0 at its end); without one, the end interval the balance pushes to."""
-        g = profile @ self.theta_basis.weights(self.scan_deg).T
+        g = profile @ self.scan_weights.T
         down = (g[:, :-1] > 0) & (g[:, 1:] <= 0)
         distance = np.where(down, np.abs(self.scan_deg[:-1] - self.near_deg)[None, :], np.inf)
         k = np.argmin(distance, axis=1)
