@@ -28,6 +28,7 @@ __all__ = ["VolumeMesh", "KEEP_SHARE", "volume_mesh"]
 
 KEEP_SHARE = 0.5  # keep the user's triangles when their median edge is at least half the element size
 MIN_SIZE_SHARE = 0.25  # the smallest element of a remeshed surface, in element sizes
+CLASSIFY_ANGLES_DEG = (40.0, 60.0, 80.0, 25.0)  # feature angles of the reparametrization, tried in turn
 SECTIONS = 60  # slabs along the surface's long axis for the section radius
 
 
@@ -53,18 +54,9 @@ def volume_mesh(surface: RepairedSurface, mesh_size: float, verbose: bool = Fals
     if initialized_here:
         gmsh.initialize(interruptible=False)
     gmsh.option.setNumber("General.Verbosity", 5 if verbose else 0)
-    gmsh.model.add("muscle_surface")
     try:
-        patch = gmsh.model.addDiscreteEntity(2)
-        gmsh.model.mesh.addNodes(2, patch, np.arange(1, len(surface.vertices) + 1), surface.vertices.ravel())
-        gmsh.model.mesh.addElementsByType(patch, 2, [], (surface.faces + 1).ravel())
-        if keep:
-            patches = [patch]
-        else:
-            # patches that can be parametrized, then a geometry gmsh can remesh
-            gmsh.model.mesh.classifySurfaces(np.radians(40.0), True, True, np.pi)
-            gmsh.model.mesh.createGeometry()
-            patches = [tag for _, tag in gmsh.model.getEntities(2)]
+        patch = _add_surface(gmsh, surface)
+        patches = [patch] if keep else _reparametrize(gmsh, surface)
         loop = gmsh.model.geo.addSurfaceLoop(patches)
         gmsh.model.geo.addVolume([loop])
         gmsh.model.geo.synchronize()
@@ -106,6 +98,36 @@ def volume_mesh(surface: RepairedSurface, mesh_size: float, verbose: bool = Fals
     mesh.check()
     return VolumeMesh(mesh, keep, _vertices_kept(surface.vertices, mesh.points), time.perf_counter() - t0,
                       float(np.min(quality)), straightened)
+
+
+def _add_surface(gmsh, surface: RepairedSurface) -> int:
+    """A fresh gmsh model holding the surface as one discrete entity; its tag."""
+    gmsh.model.add("muscle_surface")
+    patch = gmsh.model.addDiscreteEntity(2)
+    gmsh.model.mesh.addNodes(2, patch, np.arange(1, len(surface.vertices) + 1), surface.vertices.ravel())
+    gmsh.model.mesh.addElementsByType(patch, 2, [], (surface.faces + 1).ravel())
+    return patch
+
+
+def _reparametrize(gmsh, surface: RepairedSurface) -> list[int]:
+    """Split the discrete surface into patches that can be parametrized and build a geometry gmsh
+    can remesh; the patches' tags. The split follows the angle between neighbouring triangles:
+    on a noisy segmentation one threshold can leave a patch that is not a disk ("Wrong topology
+    of boundary mesh for parametrization": a closed, manifold biceps-like surface failed at 20,
+    30 and 40 deg and passed at 60), so the thresholds are tried in turn, each on a fresh model."""
+    for k, angle in enumerate(CLASSIFY_ANGLES_DEG):
+        if k:
+            gmsh.model.remove()
+            _add_surface(gmsh, surface)
+        try:
+            gmsh.model.mesh.classifySurfaces(np.radians(angle), True, True, np.pi)
+            gmsh.model.mesh.createGeometry()
+            return [tag for _, tag in gmsh.model.getEntities(2)]
+        except Exception as exc:  # gmsh raises plain Exceptions
+            error = exc
+    raise MeshError(f"gmsh could not reparametrize the surface for remeshing at any of the feature angles "
+                    f"{', '.join(f'{a:g}' for a in CLASSIFY_ANGLES_DEG)} deg ({error}); a surface with triangles about "
+                    "the profile's element size is kept as it is instead (no remeshing)")
 
 
 def section_radius(surface: RepairedSurface):

@@ -205,6 +205,37 @@ def test_a_fine_noisy_segmentation_is_remeshed_at_the_profiles_size(tmp_path):
     assert own.fibres.length == pytest.approx(345.0, rel=0.03)
 
 
+def test_a_surface_that_one_feature_angle_cannot_reparametrize_is_remeshed_at_the_next(tmp_path):
+    """The biceps-like surface at 1 mm with 40 duplicate vertices, 25 flipped triangles and a small
+    hole, as PLY (float32 coordinates): repaired to a closed manifold (Euler 2) on which gmsh's
+    split at 40 deg leaves a patch that is not a disk; the next feature angle remeshes it."""
+    import gmsh
+    import trimesh
+    from surface_files import biceps_like
+
+    from persival.model.surface_import import read_surface
+    from persival.model.surface_mesh import CLASSIFY_ANGLES_DEG, _add_surface
+    from persival.model.surface_repair import repair_surface
+
+    vertices, faces, _, _ = biceps_like()
+    defective = with_defects(vertices, faces, duplicates=40, flips=25, hole=(2000, 2001), seed=5)
+    trimesh.Trimesh(*defective, process=False).export(str(tmp_path / "biceps.ply"))
+    repaired = repair_surface(*read_surface(tmp_path / "biceps.ply"), "biceps")
+    gmsh.initialize(interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Verbosity", 0)
+        _add_surface(gmsh, repaired)
+        with pytest.raises(Exception, match="topology"):  # the first angle alone fails on this surface
+            gmsh.model.mesh.classifySurfaces(np.radians(CLASSIFY_ANGLES_DEG[0]), True, True, np.pi)
+            gmsh.model.mesh.createGeometry()
+        gmsh.model.remove()
+        volume = volume_mesh(repaired, 10.0)
+    finally:
+        gmsh.finalize()
+    assert not volume.surface_kept and volume.mesh.n_cells > 1000
+    assert volume.mesh.volume() == pytest.approx(repaired.volume, rel=0.01)
+
+
 def test_a_model_file_enters_the_run_digests_only_when_given():
     from persival.pipeline import RunConfig, _stage_inputs
 
