@@ -17,52 +17,54 @@ def register(app: typer.Typer) -> None:
     model_app = typer.Typer(cls=FullHelpGroup, help="The model file: write the built-in one for editing.",
                             no_args_is_help=True)
     app.add_typer(model_app, name="model")
+    model_app.command("init")(init)
+    app.command("mesh")(mesh)
 
-    @model_app.command("init")
-    def init(
-        out: Path = typer.Option(Path("my_arm.toml"), "--out", help="Model file to write (TOML); an existing file is "
-                                 "never overwritten."),
-    ) -> None:
-        """Write the built-in model file (bones, joint, five muscles, mesh profiles) for editing."""
-        from rich.console import Console
 
-        from persival.model.defaults import default_model_path
+def init(
+    out: Path = typer.Option(Path("my_arm.toml"), "--out", help="Model file to write (TOML); an existing file is "
+                             "never overwritten."),
+) -> None:
+    """Write the built-in model file (bones, joint, five muscles, mesh profiles) for editing."""
+    from rich.console import Console
 
-        with user_errors():
-            check_output_file(out)
-            if out.exists():
-                raise FileExistsError(f"--out {out} exists; pick a new name (it is never overwritten)")
-            out.parent.mkdir(parents=True, exist_ok=True)
-            out.write_text(default_model_path().read_text())
-        Console().print(f"wrote {out}: the built-in model. Use it with --model {out} (persival simulate, tables, mesh); "
-                        "a muscle can take its shape from a surface file (docs/own_anatomy.md).")
+    from persival.model.defaults import default_model_path
 
-    @app.command("mesh")
-    def mesh(
-        model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
-        muscles: str | None = typer.Option(None, "--muscles", help="Comma-separated muscles (default: those with their own "
-                                           "surface, or all five when none has one)."),
-        profile: str = typer.Option("quick", "--profile", help=profiles_help()),
-        out: Path = typer.Option(Path("results/mesh"), "--out", help="Output folder: <muscle>.vtu, <muscle>_surface.vtp, "
-                                 "<muscle>.png, mesh_report.json."),
-    ) -> None:
-        """Mesh a model's muscles (own surfaces repaired, meshed, given Laplace fibres) and report each step."""
-        from rich.console import Console
+    with user_errors():
+        check_output_file(out)
+        if out.exists():
+            raise FileExistsError(f"--out {out} exists; pick a new name (it is never overwritten)")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(default_model_path().read_text())
+    Console().print(f"wrote {out}: the built-in model. Use it with --model {out} (persival simulate, tables, mesh); "
+                    "a muscle can take its shape from a surface file (docs/own_anatomy.md).")
 
-        from persival.model.arm_body import ArmBody
-        from persival.model.mesh import MeshError
-        from persival.model.muscle_meshes import mesh_muscles
-        from persival.vocabulary import check_muscle_names
 
-        console = Console()
-        with user_errors():  # the model and its surfaces are checked before anything is written
-            chosen = check_muscle_names(muscles, "--muscles") if muscles is not None else None
-            body = ArmBody.frame(model, profile)
-            chosen = chosen or tuple(body.surfaces) or check_muscle_names(None)
-            check_output_dir(out)
-        with user_errors(MeshError, out=out), console.status("meshing") as status:
-            report = mesh_muscles(body, chosen, out, progress=lambda name: status.update(f"meshing the {name}"))
-        _print_mesh_report(console, report, out)
+def mesh(
+    model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+    muscles: str | None = typer.Option(None, "--muscles", help="Comma-separated muscles (default: those with their own "
+                                       "surface, or all five when none has one)."),
+    profile: str = typer.Option("quick", "--profile", help=profiles_help()),
+    out: Path = typer.Option(Path("results/mesh"), "--out", help="Output folder: <muscle>.vtu, <muscle>_surface.vtp, "
+                             "<muscle>.png, mesh_report.json."),
+) -> None:
+    """Mesh a model's muscles (own surfaces repaired, meshed, given Laplace fibres) and report each step."""
+    from rich.console import Console
+
+    from persival.model.arm_body import ArmBody
+    from persival.model.mesh import MeshError
+    from persival.model.muscle_meshes import mesh_muscles
+    from persival.vocabulary import check_muscle_names
+
+    console = Console()
+    with user_errors():  # the model and its surfaces are checked before anything is written
+        chosen = check_muscle_names(muscles, "--muscles") if muscles is not None else None
+        body = ArmBody.frame(model, profile)
+        chosen = chosen or tuple(body.surfaces) or check_muscle_names(None)
+        check_output_dir(out)
+    with user_errors(MeshError, out=out), console.status("meshing") as status:
+        report = mesh_muscles(body, chosen, out, progress=lambda name: status.update(f"meshing the {name}"))
+    _print_mesh_report(console, report, out)
 
 
 def _print_mesh_report(console, report: dict, out: Path) -> None:

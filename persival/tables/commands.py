@@ -21,107 +21,110 @@ ACTIVATIONS_HELP = f"{N_ACTIVATIONS} comma-separated activations in [0, 1], in t
 
 
 def register(app: typer.Typer) -> None:
-    """Attach ``tables``, ``simulate`` and ``moments`` to the main app."""
-    _register_moments(app)
+    """Attach ``tables``, ``simulate`` and ``moments`` (the per-muscle FE moment table, docs/theory.md
+    4.5) to the main app."""
+    app.command("moments")(moments)
+    app.command("tables")(tables)
+    app.command()(simulate)
 
-    @app.command("tables")
-    def tables(
-        profile: str = typer.Option("quick", "--profile", help=profiles_help()),
-        model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
-        out: Path | None = typer.Option(None, "--out", help="Table folder (default: the model's state cache)."),
-        moments_out: Path | None = typer.Option(None, "--moments-out",
-                                                help="Also write the moments as a moment table (.npz, for `persival motion`)."),
-        angles: str = typer.Option("-10:185:5", "--angles",
-                                  help="Elbow angles, deg: START:STOP:STEP or a list (--angles=-10:185:5 when negative)."),
-        levels: str = typer.Option(",".join(f"{v:g}" for v in DEFAULT_LEVELS), "--levels",
-                                   help="Activation levels from 0 to 1."),
-        scheduler: str | None = typer.Option(None, "--scheduler",
-                                             help="Dask scheduler address, or 'inline'; default: a LocalCluster."),
-        workers: int | None = typer.Option(None, "--workers", help="LocalCluster worker processes (default: one per core)."),
-    ) -> None:
-        """Per-muscle FE response tables over (elbow angle, activation): moments, forces, node states.
 
-        Built once per model and mesh (resumable: a killed build keeps its finished columns);
-        `persival simulate` and FE-arm campaigns answer from them.
-        """
-        from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
+def tables(
+    profile: str = typer.Option("quick", "--profile", help=profiles_help()),
+    model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+    out: Path | None = typer.Option(None, "--out", help="Table folder (default: the model's state cache)."),
+    moments_out: Path | None = typer.Option(None, "--moments-out",
+                                            help="Also write the moments as a moment table (.npz, for `persival motion`)."),
+    angles: str = typer.Option("-10:185:5", "--angles",
+                              help="Elbow angles, deg: START:STOP:STEP or a list (--angles=-10:185:5 when negative)."),
+    levels: str = typer.Option(",".join(f"{v:g}" for v in DEFAULT_LEVELS), "--levels",
+                               help="Activation levels from 0 to 1."),
+    scheduler: str | None = typer.Option(None, "--scheduler",
+                                         help="Dask scheduler address, or 'inline'; default: a LocalCluster."),
+    workers: int | None = typer.Option(None, "--workers", help="LocalCluster worker processes (default: one per core)."),
+) -> None:
+    """Per-muscle FE response tables over (elbow angle, activation): moments, forces, node states.
 
-        from persival.log_progress import progress_bar
-        from persival.model.arm_body import ArmBody
-        from persival.tables.moment_table import TableMismatchError, check_grids
-        from persival.tables.open import ensure_tables
+    Built once per model and mesh (resumable: a killed build keeps its finished columns);
+    `persival simulate` and FE-arm campaigns answer from them.
+    """
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 
-        console = Console()
-        with user_errors(TableMismatchError):
-            grid = check_grids(parse_grid(angles, "--angles"), parse_grid(levels, "--levels"))
-            ArmBody.frame(model, profile)  # the model file, its profile and its own surfaces
-            if moments_out is not None and moments_out.suffix != ".npz":
-                raise ValueError(f"--moments-out must name a .npz file, got {moments_out}")
-            if out is not None and out.exists() and not (out / "header.json").is_file() and \
-                    (out.is_file() or any(out.iterdir())):
-                raise TableMismatchError(f"{out} exists and is not a response table (no header.json); pick an empty folder")
-            t0 = time.perf_counter()
-            bar = progress_bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                           console=console)
-            with bar:
-                task = bar.add_task("meshing, rest states", total=None)
+    from persival.log_progress import progress_bar
+    from persival.model.arm_body import ArmBody
+    from persival.tables.moment_table import TableMismatchError, check_grids
+    from persival.tables.open import ensure_tables
 
-                def report(done, total):
-                    bar.update(task, completed=done, total=total, description="response table columns")
+    console = Console()
+    with user_errors(TableMismatchError):
+        grid = check_grids(parse_grid(angles, "--angles"), parse_grid(levels, "--levels"))
+        ArmBody.frame(model, profile)  # the model file, its profile and its own surfaces
+        if moments_out is not None and moments_out.suffix != ".npz":
+            raise ValueError(f"--moments-out must name a .npz file, got {moments_out}")
+        if out is not None and out.exists() and not (out / "header.json").is_file() and \
+                (out.is_file() or any(out.iterdir())):
+            raise TableMismatchError(f"{out} exists and is not a response table (no header.json); pick an empty folder")
+        t0 = time.perf_counter()
+        bar = progress_bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                       console=console)
+        with bar:
+            task = bar.add_task("meshing, rest states", total=None)
 
-                table = ensure_tables(model, profile, str(out) if out else None, report, scheduler, workers, *grid)
-            if moments_out is not None:
-                moments_out.parent.mkdir(parents=True, exist_ok=True)
-                table.moment_table().save(moments_out)
-        _print_table(console, table, time.perf_counter() - t0)
+            def report(done, total):
+                bar.update(task, completed=done, total=total, description="response table columns")
+
+            table = ensure_tables(model, profile, str(out) if out else None, report, scheduler, workers, *grid)
         if moments_out is not None:
-            console.print(f"wrote the moment table {moments_out}")
+            moments_out.parent.mkdir(parents=True, exist_ok=True)
+            table.moment_table().save(moments_out)
+    _print_table(console, table, time.perf_counter() - t0)
+    if moments_out is not None:
+        console.print(f"wrote the moment table {moments_out}")
 
-    @app.command()
-    def simulate(
-        activations: str = typer.Option(..., "--activations", "-a", help=ACTIVATIONS_HELP),
-        model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
-        profile: str = typer.Option("quick", "--profile", help=profiles_help()),
-        method: str = typer.Option("auto", "--method",
-                                   help="tables (from `persival tables`), direct (coupled continuation) or auto "
-                                        "(tables when built)."),
-        out: Path = typer.Option(Path("results/simulate"), "--out", help="Output directory (state.json + VTU)."),
-        angle: float | None = typer.Option(None, "--angle", help="Hold the elbow at this angle (deg; an isometric "
-                                           "state: each muscle's FE equilibrium there, a brace takes the joint's moment; "
-                                           "solved directly)."),
-    ) -> None:
-        """Solve the FE arm for one activation vector (or hold it at --angle); write state.json and VTU files."""
-        from rich.console import Console
 
-        from persival.model.arm_body import ArmBody
-        from persival.vocabulary import check_activation_vector
+def simulate(
+    activations: str = typer.Option(..., "--activations", "-a", help=ACTIVATIONS_HELP),
+    model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+    profile: str = typer.Option("quick", "--profile", help=profiles_help()),
+    method: str = typer.Option("auto", "--method",
+                               help="tables (from `persival tables`), direct (coupled continuation) or auto "
+                                    "(tables when built)."),
+    out: Path = typer.Option(Path("results/simulate"), "--out", help="Output directory (state.json + VTU)."),
+    angle: float | None = typer.Option(None, "--angle", help="Hold the elbow at this angle (deg; an isometric "
+                                       "state: each muscle's FE equilibrium there, a brace takes the joint's moment; "
+                                       "solved directly)."),
+) -> None:
+    """Solve the FE arm for one activation vector (or hold it at --angle); write state.json and VTU files."""
+    from rich.console import Console
 
-        console = Console()
-        with user_errors():  # every input is checked before the meshing and solve
-            alpha = check_activation_vector(parse_activations(activations)).tolist()
-            spec = ArmBody.frame(model, profile).spec  # the model file, its profile and its own surfaces
-            lower, upper = spec.joint.limits_deg
-            if angle is not None and not lower <= angle <= upper:
-                raise ValueError(f"--angle must lie within the joint limits [{lower:g}, {upper:g}] deg, got {angle:g}")
-            if method not in ("auto", "tables", "direct"):
-                raise ValueError(f"--method must be auto, tables or direct, got {method!r}")
-            check_output_dir(out)
-        with user_errors(out=out):
-            if angle is None:
-                state, arm, path = _solve_one(console, model, profile, method, alpha)
-            else:
-                state, arm = _hold_one(console, model, profile, alpha, angle)
-                path = "held by a brace: the residual is its moment"
-            from persival.model.output import write_state
+    from persival.model.arm_body import ArmBody
+    from persival.vocabulary import check_activation_vector
 
-            write_state(arm, state, out)
-        console.print(
-            f"elbow angle [bold]{state.elbow_angle_deg:.2f} deg[/bold] ({path}), moment residual "
-            f"{state.moment_residual:.2e} N mm, {state.statistics['iterations']} Newton iterations, "
-            f"{state.wall_time_s:.1f} s solve, max |J-1| {state.max_volume_change:.2e}"
-        )
-        console.print(f"wrote {out}/state.json and VTU files (open {out}/*.vtu in ParaView)")
+    console = Console()
+    with user_errors():  # every input is checked before the meshing and solve
+        alpha = check_activation_vector(parse_activations(activations)).tolist()
+        spec = ArmBody.frame(model, profile).spec  # the model file, its profile and its own surfaces
+        lower, upper = spec.joint.limits_deg
+        if angle is not None and not lower <= angle <= upper:
+            raise ValueError(f"--angle must lie within the joint limits [{lower:g}, {upper:g}] deg, got {angle:g}")
+        if method not in ("auto", "tables", "direct"):
+            raise ValueError(f"--method must be auto, tables or direct, got {method!r}")
+        check_output_dir(out)
+    with user_errors(out=out):
+        if angle is None:
+            state, arm, path = _solve_one(console, model, profile, method, alpha)
+        else:
+            state, arm = _hold_one(console, model, profile, alpha, angle)
+            path = "held by a brace: the residual is its moment"
+        from persival.model.output import write_state
+
+        write_state(arm, state, out)
+    console.print(
+        f"elbow angle [bold]{state.elbow_angle_deg:.2f} deg[/bold] ({path}), moment residual "
+        f"{state.moment_residual:.2e} N mm, {state.statistics['iterations']} Newton iterations, "
+        f"{state.wall_time_s:.1f} s solve, max |J-1| {state.max_volume_change:.2e}"
+    )
+    console.print(f"wrote {out}/state.json and VTU files (open {out}/*.vtu in ParaView)")
 
 
 def _solve_one(console, model, profile: str, method: str, alpha):
@@ -184,44 +187,40 @@ def _print_table(console, table, seconds: float) -> None:
     console.print(f"{int(table.done.sum())} of {table.done.size} columns, angles {lo:g} to {hi:g} deg converged at every level")
 
 
-def _register_moments(app: typer.Typer) -> None:
-    """``persival moments``: the per-muscle FE moment table (docs/theory.md, 4.5)."""
+def moments(
+    out: Path = typer.Option(..., "--out", help="Table file (.npz); an unfinished one of the same grid is resumed."),
+    profile: str = typer.Option("quick", "--profile", help="Mesh profile (coarse, quick, paper)."),
+    model: Path = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+    angles: str = typer.Option("0:160:10", "--angles", help="Elbow angles, deg: START:STOP:STEP or a list."),
+    levels: str = typer.Option("0,0.25,0.5,0.75,1", "--levels", help="Activation levels from 0 to 1."),
+) -> None:
+    """Per-muscle FE moment tables over (elbow angle, activation), by continuation along the angle."""
+    import time
 
-    @app.command("moments")
-    def moments(
-        out: Path = typer.Option(..., "--out", help="Table file (.npz); an unfinished one of the same grid is resumed."),
-        profile: str = typer.Option("quick", "--profile", help="Mesh profile (coarse, quick, paper)."),
-        model: Path = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
-        angles: str = typer.Option("0:160:10", "--angles", help="Elbow angles, deg: START:STOP:STEP or a list."),
-        levels: str = typer.Option("0,0.25,0.5,0.75,1", "--levels", help="Activation levels from 0 to 1."),
-    ) -> None:
-        """Per-muscle FE moment tables over (elbow angle, activation), by continuation along the angle."""
-        import time
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 
-        from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
+    from persival.log_progress import progress_bar
+    from persival.model.arm import ArmModel
+    from persival.model.arm_file import load_model_file
+    from persival.tables.moment_table import build_moment_table, check_grids, resumable
 
-        from persival.log_progress import progress_bar
-        from persival.model.arm import ArmModel
-        from persival.model.arm_file import load_model_file
-        from persival.tables.moment_table import build_moment_table, check_grids, resumable
-
-        console = Console()
-        with user_errors(out=out):  # every check before the meshing; a new file is removed on a user error
-            grid = check_grids(parse_grid(angles, "--angles"), parse_grid(levels, "--levels"))
-            spec, model_hash = load_model_file(model)
-            spec.profile(profile)
-            check_output_file(out)
-            resumable(out, model_hash, profile, *grid)
-            arm = ArmModel(model, profile)
-        t0 = time.perf_counter()
-        bar = progress_bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                           console=console)
-        with bar, user_errors():
-            task = bar.add_task("moment table", total=5 * len(grid[1]))
-            table = build_moment_table(arm, *grid, out=out, progress=lambda done, total, label: bar.update(
-                task, completed=done, description=label))
-        print_moment_table(console, table, time.perf_counter() - t0, out)
+    console = Console()
+    with user_errors(out=out):  # every check before the meshing; a new file is removed on a user error
+        grid = check_grids(parse_grid(angles, "--angles"), parse_grid(levels, "--levels"))
+        spec, model_hash = load_model_file(model)
+        spec.profile(profile)
+        check_output_file(out)
+        resumable(out, model_hash, profile, *grid)
+        arm = ArmModel(model, profile)
+    t0 = time.perf_counter()
+    bar = progress_bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                       console=console)
+    with bar, user_errors():
+        task = bar.add_task("moment table", total=5 * len(grid[1]))
+        table = build_moment_table(arm, *grid, out=out, progress=lambda done, total, label: bar.update(
+            task, completed=done, description=label))
+    print_moment_table(console, table, time.perf_counter() - t0, out)
 
 
 def print_moment_table(console, table, seconds: float, out: Path) -> None:
