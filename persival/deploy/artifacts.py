@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from persival.file_header import check_header
 from persival.vocabulary import N_ACTIVATIONS, check_activation_vector
 
 __all__ = ["ArtifactError", "DeployedModel", "FORMAT_NAME", "SUPPORTED_VERSIONS", "TIERS"]
@@ -81,12 +82,8 @@ def load_metadata(folder: Path) -> dict:
         meta = json.loads(path.read_text())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ArtifactError(f"{path}: not valid JSON ({exc})") from None
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
-        raise ArtifactError(f"{path}: format is not {FORMAT_NAME!r}")
-    if meta.get("format_version") not in SUPPORTED_VERSIONS:
-        raise ArtifactError(f"{path}: format_version {meta.get('format_version')!r} is not supported "
-                            f"(this server reads {list(SUPPORTED_VERSIONS)})")
-    return meta
+    return check_header(meta, path, "PerSival export", FORMAT_NAME, SUPPORTED_VERSIONS, ArtifactError,
+                        version_key="format_version", advice="export it again with this version")
 
 
 def _check_geometry(meta: dict) -> None:

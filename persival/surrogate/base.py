@@ -19,6 +19,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from persival.file_header import check_header
 from persival.surrogate.dataset import Dataset, Surfaces
 
 __all__ = ["Surrogate", "NotFittedError", "load_surrogate", "KINDS", "MANIFEST"]
@@ -86,11 +87,8 @@ class Surrogate(ABC):
         manifest = _manifest(Path(path))
         if manifest.get("kind", "sparse-grid") != cls.kind:
             raise ValueError(f"{path} holds a {manifest.get('kind')!r} surrogate, not a {cls.kind!r} one")
-        version = manifest.get("format_version", 1)
-        if version != cls.format_version:
-            raise ValueError(f"{path}: {cls.kind} surrogate of format version {version}; this PerSival reads version "
-                             f"{cls.format_version}: fit it again")
-        return manifest
+        return check_header({"format_version": 1, **manifest}, path, f"{cls.kind} surrogate", None, cls.format_version,
+                            version_key="format_version", advice="fit it again")
 
 
 def _json_default(value):

@@ -19,11 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
+from persival.file_header import check_header
 from persival.surrogate.dataset import Dataset, Surfaces
 
 __all__ = ["generate_training_data", "load_training_data", "sample_inputs"]
 
 _FORMAT = "persival-training-data"
+_VERSION = 1  # folders written before the header had a version are version 1
 
 
 def sample_inputs(activation_model, n_samples: int, angle_fraction: float, seed: int):
@@ -72,7 +74,8 @@ def generate_training_data(sg, activation_model, out: str | Path, n_samples: int
             progress(rows.stop - rows.start, n_samples)
     group["activations"][:] = alpha
     group["target_deg"][:] = targets
-    meta_file.write_text(json.dumps({"format": _FORMAT, "config": config, "source": source, "complete": True}, indent=2))
+    meta_file.write_text(json.dumps({"format": _FORMAT, "version": _VERSION, "config": config, "source": source,
+                                       "complete": True}, indent=2))
     return out
 
 
@@ -91,7 +94,7 @@ def _open_or_create(out: Path, config: dict, n: int, n_nodes: int, chunk: int):
     if out.exists() and any(out.iterdir()):
         raise ValueError(f"{out} exists and is not a training-data folder")
     out.mkdir(parents=True, exist_ok=True)
-    meta_file.write_text(json.dumps({"format": _FORMAT, "config": config, "complete": False}, indent=2))
+    meta_file.write_text(json.dumps({"format": _FORMAT, "version": _VERSION, "config": config, "complete": False}, indent=2))
     group = zarr.open_group(str(out / "arrays.zarr"), mode="w")
     group.create_array("positions", shape=(n, n_nodes, 3), chunks=(chunk, n_nodes, 3), dtype="f4")
     group.create_array("elbow_angles", shape=(n,), chunks=(n,), dtype="f8")
@@ -106,9 +109,8 @@ def load_training_data(path: str | Path) -> Dataset:
     import zarr
 
     path = Path(path)
-    meta = json.loads((path / "training_data.json").read_text())
-    if meta.get("format") != _FORMAT:
-        raise ValueError(f"{path} is not a training-data folder")
+    meta = check_header({"version": 1, **json.loads((path / "training_data.json").read_text())}, path,
+                        "training-data folder", _FORMAT, _VERSION, advice="make it again (`persival data`)")
     if not meta.get("complete"):
         raise ValueError(f"{path} is incomplete: run persival data again with the same options to finish it")
     g = zarr.open_group(str(path / "arrays.zarr"), mode="r")

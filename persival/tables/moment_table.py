@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from persival.file_header import check_header
 from persival.model.solver import ConvergenceError
 from persival.vocabulary import MUSCLES
 
@@ -224,11 +225,7 @@ class MomentTable:
                 arrays = {k: data[k] for k in data.files if k != "header"}
         except (OSError, ValueError, KeyError) as exc:
             raise TableMismatchError(f"{path} is not a moment table ({exc})") from None
-        if header.get("format") != FORMAT:
-            raise TableMismatchError(f"{path} is not a moment table (format {header.get('format')!r})")
-        if header.get("version") != VERSION:
-            raise TableMismatchError(f"{path} is a moment table of format version {header.get('version')}, "
-                                     f"this PerSival reads {VERSION}: rebuild it")
+        check_header(header, path, "moment table", FORMAT, VERSION, TableMismatchError, advice="rebuild it")
         meta = {k: v for k, v in header.items() if k not in ("format", "version", "muscles")}
         table = cls(meta=meta, **arrays)
         if model_hash is not None and meta.get("model_hash") != model_hash:

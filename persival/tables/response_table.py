@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from persival.file_header import check_header
 from persival.model.muscle_state import MuscleState
 from persival.model.state_cache import mesh_fingerprint
 from persival.tables.moment_table import MomentTable, TableMismatchError, check_grids, empty_moment_table, sweep_muscle
@@ -110,11 +111,8 @@ class ResponseTable:
             raise FileNotFoundError(f"{root}: no response table here (no header.json)") from None
         except (OSError, ValueError) as exc:
             raise TableMismatchError(f"{root}/header.json is not a response table header ({exc})") from None
-        if header.get("format") != FORMAT:
-            raise TableMismatchError(f"{root} is not a response table (format {header.get('format')!r})")
-        if header.get("version") != VERSION:
-            raise TableMismatchError(f"{root} is a response table of format version {header.get('version')}, this "
-                                     f"PerSival reads version {VERSION}: build it again (`persival tables`)")
+        check_header(header, root, "response table", FORMAT, VERSION, TableMismatchError,
+                     advice="build it again (`persival tables`)")
         if model_hash is not None and header["model_hash"] != model_hash:
             raise TableMismatchError(f"{root} was built for another model: model hash {header['model_hash'][:12]}, "
                                      f"this model {model_hash[:12]}")
