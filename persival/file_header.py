@@ -4,6 +4,14 @@ A response or moment table, a campaign store, a training-data folder, an export'
 and a surrogate's surrogate.json each start with ``{"format": NAME, <version key>: N, ...}``.
 :func:`check_header` refuses a header of another kind or version with one message of the same
 shape everywhere, raised as the caller's own error class (its callers catch those).
+
+>>> check_header({"format": "persival-response-table", "version": 3}, "t/header.json", "response table",
+...              "persival-response-table", 3)["version"]
+3
+>>> check_header({"format": "persival-response-table", "version": 2}, "t/header.json", "response table",
+...              "persival-response-table", 3, advice="build it again")
+Traceback (most recent call last):
+ValueError: t/header.json is a response table of format version 2; this PerSival reads version 3: build it again
 """
 
 from __future__ import annotations

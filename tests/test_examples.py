@@ -65,7 +65,7 @@ def test_example_runs_and_prints_its_number(script, tmp_path):
 
 
 DOCTEST_MODULES = ["persival.vocabulary", "persival.surrogate.sparse_grid", "persival.surrogate.dataset",
-                   "persival.campaign.design"]
+                   "persival.campaign.design", "persival.surrogate.reduction", "persival.file_header"]
 
 
 @pytest.mark.parametrize("module", DOCTEST_MODULES)

@@ -19,7 +19,9 @@ import numpy as np
 import torch
 from torch import nn
 
-__all__ = ["ACTIVATIONS", "mlp", "paper_widths", "PaperNet", "PodNet", "pod_basis", "count_parameters"]
+from persival.surrogate.reduction import POD
+
+__all__ = ["ACTIVATIONS", "mlp", "paper_widths", "PaperNet", "PodNet", "count_parameters"]
 
 PAPER_NODES, PAPER_MID = 2809, 700  # docs/theory.md, 7.2: the paper's output and middle widths
 ACTIVATIONS = {"relu": nn.ReLU, "tanh": nn.Tanh, "silu": nn.SiLU, "elu": nn.ELU}
@@ -104,46 +106,6 @@ class _CombinedPaperNet(nn.Module):
         return torch.stack(coords, dim=2)  # (b, N, 3): interleaved xyz
 
 
-def pod_basis(displacements: np.ndarray, rank: int | None = None, energy: float = 0.99999, max_rank: int | None = None):
-    """Mean (3N,), the leading POD modes (r, 3N) of (n, N, 3) displacements, and their singular values.
-
-    ``rank`` given: that many modes; else the smallest rank keeping ``energy`` of the
-    fluctuation's squared norm, at most ``max_rank``. With a cap well below the sample count,
-    the modes come from a randomized subspace iteration (:func:`_leading_modes`): the main job's
-    4000 x 23382 snapshots took 24 s by the n x n Gram matrix and its full eigendecomposition.
-    """
-    u = np.asarray(displacements, dtype=np.float64).reshape(len(displacements), -1)
-    mean = u.mean(axis=0)
-    centred = u - mean
-    wanted = rank if rank is not None else max_rank
-    if wanted is not None and wanted + 24 < min(centred.shape) // 2:
-        s, modes = _leading_modes(centred, wanted + 16)
-    else:  # the n x n Gram matrix (n samples << 3N outputs) instead of an SVD of the snapshots
-        w, v = np.linalg.eigh(centred @ centred.T)
-        w, v = np.clip(w[::-1], 0.0, None), v[:, ::-1]
-        s = np.sqrt(w)
-        modes = None
-    if rank is None:
-        captured = np.cumsum(s**2) / max(float(np.vdot(centred, centred)), 1e-300)  # no (n, 3N) temporary
-        rank = int(np.searchsorted(captured, energy) + 1)
-        rank = rank if max_rank is None else min(rank, max_rank)
-    rank = int(min(rank, int(np.sum(s > s[0] * 1e-10)), len(s)))
-    basis = modes[:rank] if modes is not None else (v[:, :rank].T @ centred) / s[:rank, None]
-    return mean, basis, s[:rank]
-
-
-def _leading_modes(a: np.ndarray, k: int, power_iterations: int = 6) -> tuple[np.ndarray, np.ndarray]:
-    """The k leading singular values and right singular vectors (k, m) of a (n, m): randomized
-    subspace iteration (Halko, Martinsson and Tropp 2011, algorithm 4.4) with a fixed seed, then
-    Rayleigh-Ritz. The snapshots' spectrum falls fast, so six iterations leave the modes kept by
-    the energy criterion exact to rounding (tests/test_networks.py compares with the Gram route)."""
-    q = np.linalg.qr(a @ np.random.default_rng(0).standard_normal((a.shape[1], k)))[0]
-    for _ in range(power_iterations):
-        q = np.linalg.qr(a @ np.linalg.qr(a.T @ q)[0])[0]
-    _, s, vt = np.linalg.svd(q.T @ a, full_matrices=False)
-    return s, vt
-
-
 class PodNet(nn.Module):
     """alpha -> normalized (POD coefficients, elbow angle); the basis is applied outside training."""
 
@@ -159,10 +121,10 @@ class PodNet(nn.Module):
         self.register_buffer("angle_scale", torch.ones(1))
 
     def fit_normalization(self, u: np.ndarray, angles: np.ndarray, pod=None) -> None:
-        """The POD of the training displacements (or ``pod`` = (mean, basis) computed already)
-        and the scales of the coefficients and the angle."""
-        mean, basis = pod if pod is not None else pod_basis(u, rank=self.config["rank"])[:2]
-        basis = basis[: self.config["rank"]]
+        """The POD of the training displacements (or ``pod``, a fitted :class:`POD`) and the scales
+        of the coefficients and the angle."""
+        pod = pod if pod is not None else POD(rank=self.config["rank"]).fit(u)
+        mean, basis = pod.mean, pod.modes[: self.config["rank"]]
         coefficients = (u.reshape(len(u), -1) - mean) @ basis.T
         with torch.no_grad():
             self.mean.copy_(torch.as_tensor(mean, dtype=torch.float32))

@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from persival.surrogate.networks import ACTIVATIONS, PaperNet, PodNet, pod_basis
+from persival.surrogate.networks import ACTIVATIONS, PaperNet, PodNet
+from persival.surrogate.reduction import POD
 
 __all__ = ["TrainingConfig", "build_net", "train", "choose_rank"]
 
@@ -52,11 +53,10 @@ class TrainingConfig:
 
 
 def choose_rank(u: np.ndarray, config: TrainingConfig):
-    """(rank, (mean, basis)): the smallest rank keeping ``energy`` of the displacement
-    fluctuations, at most ``max_rank`` (or ``config.rank``), and the POD itself."""
-    mean, basis, _ = pod_basis(u, rank=config.rank, energy=config.energy,
-                               max_rank=None if config.rank is not None else config.max_rank)
-    return len(basis), (mean, basis)
+    """(rank, POD): the reduction of the displacements, the smallest rank keeping ``energy`` of
+    their fluctuations, at most ``max_rank`` (or ``config.rank``)."""
+    pod = POD(rank=config.rank, energy=config.energy, max_rank=None if config.rank is not None else config.max_rank).fit(u)
+    return pod.rank, pod
 
 
 def build_net(config: TrainingConfig, n_nodes: int, rank: int | None = None):

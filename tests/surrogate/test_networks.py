@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from persival.surrogate.networks import PaperNet, count_parameters, paper_widths, pod_basis
+from persival.surrogate.networks import PaperNet, count_parameters, paper_widths
+from persival.surrogate.reduction import pod_basis
 
 
 def test_paper_architecture_has_the_spec_widths_and_parameter_count():

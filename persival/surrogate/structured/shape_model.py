@@ -15,30 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from persival.surrogate.reduction import POD
 from persival.vocabulary import MUSCLES
 
-__all__ = ["MuscleShape", "fit_muscle_shape", "pod_modes"]
+__all__ = ["MuscleShape", "fit_muscle_shape"]
 
 ROTATION_STEP_DEG = 1e-3  # central differences of Q(theta) for its Hermite slopes
-
-
-def pod_modes(snapshots: np.ndarray, tolerance_mm: float, max_modes: int) -> tuple[np.ndarray, np.ndarray, dict]:
-    """Mean (d,) and modes (r, d) of snapshots (n, d) of interleaved xyz: the fewest modes whose
-    projection leaves every snapshot within ``tolerance_mm`` at every node (at most ``max_modes``)."""
-    mean = snapshots.mean(axis=0)
-    centred = snapshots - mean
-    _, sigma, vt = np.linalg.svd(centred, full_matrices=False)
-    n_nodes = snapshots.shape[1] // 3
-    worst = []
-    for r in range(1, min(max_modes, len(sigma)) + 1):
-        residual = centred - (centred @ vt[:r].T) @ vt[:r]
-        worst.append(float(np.sqrt((residual.reshape(len(snapshots), n_nodes, 3) ** 2).sum(axis=2)).max()))
-        if worst[-1] <= tolerance_mm:
-            break
-    r = len(worst)
-    energy = float((sigma[:r] ** 2).sum() / max((sigma**2).sum(), 1e-300))
-    return mean, vt[:r], {"modes": r, "worst_projection_error_mm": worst[-1], "energy": energy,
-                          "singular_values": sigma[: max(r, 1) + 4].tolist()}
 
 
 @dataclass
@@ -90,12 +72,13 @@ def fit_muscle_shape(table, unit, name: str, surface_ids: np.ndarray, angle_inde
     n_t, n_a = values.shape[:2]
     if not (np.isfinite(values).all() and np.isfinite(slopes).all()):
         raise ValueError(f"{name}: the response table has failed solves inside {angles[0]:g} to {angles[-1]:g} deg")
-    mean, modes, report = pod_modes(values.reshape(n_t * n_a, -1), tolerance_mm, max_modes)
-    coefficient_values = (values.reshape(n_t, n_a, -1) - mean) @ modes.T
+    pod = POD(max_rank=max_modes, tolerance_mm=tolerance_mm).fit(values.reshape(n_t * n_a, -1))
+    mean, modes = pod.mean, pod.modes
+    coefficient_values = pod.transform(values.reshape(n_t * n_a, -1)).reshape(n_t, n_a, -1)
     coefficient_slopes = slopes.reshape(n_t, n_a, -1) @ modes.T
     rotations = np.stack([unit.rotation(t).ravel() for t in angles])
     rotation_slopes = np.stack([(unit.rotation(t + ROTATION_STEP_DEG) - unit.rotation(t - ROTATION_STEP_DEG)).ravel()
                                 for t in angles]) / (2 * ROTATION_STEP_DEG)
     return MuscleShape(name, np.asarray(unit.origin, dtype=float), mean, modes,
                        np.concatenate([coefficient_values, coefficient_slopes], axis=0),
-                       np.concatenate([rotations, rotation_slopes], axis=0), report)
+                       np.concatenate([rotations, rotation_slopes], axis=0), pod.report())
