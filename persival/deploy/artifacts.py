@@ -210,8 +210,11 @@ class DeployedModel:
                 for s in self.metadata["surfaces"]}
 
     def files(self) -> dict[str, Path]:
-        """The artifact files a client may download: metadata.json and every listed model."""
+        """The artifact files a client may download: metadata.json and every listed model (the
+        deformation tiers, its required-load file if exported, the activation models)."""
         models = self.metadata["models"]
         names = ["metadata.json"] + [v["file"] for v in models["deformation"]["variants"].values()]
+        if models["deformation"].get("load_variant"):
+            names.append(models["deformation"]["load_variant"]["file"])
         names += [models[k]["file"] for k in ("activation_angle", "activation_motion") if models.get(k)]
         return {n: self.folder / n for n in names}

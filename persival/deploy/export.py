@@ -5,7 +5,10 @@ in three tiers (float32; float16 weights with float32 inputs and outputs; dynami
 quantization of the matrix products), the activation models, and ``metadata.json`` with the
 surfaces, the skeleton, the reachable range and the provenance. Every tier is run once through
 onnxruntime against the PyTorch graph it came from, and the differences go into the metadata:
-float32 must agree within 1e-4 mm or the export fails.
+float32 must agree within 1e-4 mm or the export fails. A graph that takes the load in the hand
+(``load_kg``) is written twice: ``deformation.onnx`` with the load optional (0 kg by default, the
+deployment contract: activations alone) and ``deformation_load.onnx`` with it a required input,
+for runtimes that cannot feed an input backed by an initializer (onnxruntime-web).
 """
 
 from __future__ import annotations
@@ -31,6 +34,8 @@ OPSET = 17
 FLOAT32_TOLERANCE_MM = 1e-4
 TIERS = ("float32", "float16", "int8")
 LOAD_INPUT = "load_kg"  # optional second input of a graph that solves the joint equilibrium
+LOAD_FILE = "deformation_load.onnx"  # the same graph with load_kg a required input
+LOAD_PROBE_KG = 2.0  # the load the required-input file is checked at
 
 
 def _onnx(module: torch.nn.Module, example, path: Path, input_name, output_names: list[str], fold: bool = True) -> None:
@@ -117,6 +122,39 @@ def _check_tiers(files: dict[str, Path], graph, probe: np.ndarray, names: list[s
     return out
 
 
+def _check_load_variant(path: Path, graph, probe: np.ndarray, names: list[str], tolerance_mm: float) -> dict:
+    """Max |onnxruntime - torch| per output of the required-load file at LOAD_PROBE_KG in the hand."""
+    load = np.full((len(probe), 1), LOAD_PROBE_KG, np.float32)
+    with torch.no_grad():
+        ref = graph(torch.as_tensor(probe, dtype=torch.float32), torch.as_tensor(load))
+    ref = [r.numpy() for r in (ref if isinstance(ref, tuple) else (ref,))]
+    got = _session(path).run(None, {"activations": probe.astype(np.float32), LOAD_INPUT: load})
+    diffs = {name: float(np.abs(g - r).max()) for name, g, r in zip(names, got, ref)}
+    if diffs["positions"] > tolerance_mm:
+        raise RuntimeError(f"{path.name} differs from PyTorch at {LOAD_PROBE_KG} kg by {diffs['positions']:.2e} mm "
+                           f"(tolerance {tolerance_mm:.0e})")
+    return {"file": path.name, "inputs": {"activations": [None, 5], LOAD_INPUT: [None, 1]}, "bytes": path.stat().st_size,
+            "checked_at_load_kg": LOAD_PROBE_KG, "max_abs_diff_vs_torch": diffs}
+
+
+def _export_deformation(surrogate, graph, folder: Path, names: list[str], probe: np.ndarray) -> dict:
+    """Write and check the deformation graph's files in ``folder``; returns ``{"variants"}`` and,
+    for a graph that takes the load, ``"load_variant"`` (deformation_load.onnx)."""
+    path = folder / "deformation.onnx"
+    tolerance = getattr(surrogate, "export_tolerance_mm", FLOAT32_TOLERANCE_MM)
+    load = {}
+    if _takes_load(graph):
+        _onnx(graph, (torch.full((2, 5), 0.5), torch.zeros(2, 1)), path, ("activations", LOAD_INPUT), names,
+              fold=getattr(surrogate, "export_constant_folding", True))
+        shutil.copyfile(path, folder / LOAD_FILE)  # before the load becomes optional: a true input there
+        _optional_load_input(path)
+        load["load_variant"] = _check_load_variant(folder / LOAD_FILE, graph, probe, names, tolerance)
+    else:
+        _onnx(graph, torch.full((2, 5), 0.5), path, "activations", names)
+    variants = _check_tiers(_tiers(path, getattr(surrogate, "deploy_tiers", TIERS)), graph, probe, names, tolerance)
+    return {"variants": variants, **load}
+
+
 def _takes_load(graph) -> bool:
     import inspect
 
@@ -152,22 +190,14 @@ def export_model(surrogate, out: str | Path, activation_model=None, motion_model
     graph = surrogate.deployable()
     names = ["positions", "elbow_angle_deg"] if surrogate.has_angle else ["positions"]
     takes_load = _takes_load(graph)
-    if takes_load:
-        _onnx(graph, (torch.full((2, 5), 0.5), torch.zeros(2, 1)), tmp / "deformation.onnx", ("activations", LOAD_INPUT), names,
-              fold=getattr(surrogate, "export_constant_folding", True))
-        _optional_load_input(tmp / "deformation.onnx")
-    else:
-        _onnx(graph, torch.full((2, 5), 0.5), tmp / "deformation.onnx", "activations", names)
-    probe = np.random.default_rng(seed).uniform(0.0, 1.0, (n_probe, 5))
-    variants = _check_tiers(_tiers(tmp / "deformation.onnx", getattr(surrogate, "deploy_tiers", TIERS)), graph, probe, names,
-                            getattr(surrogate, "export_tolerance_mm", FLOAT32_TOLERANCE_MM))
+    files = _export_deformation(surrogate, graph, tmp, names, np.random.default_rng(seed).uniform(0.0, 1.0, (n_probe, 5)))
     surfaces = surrogate.surfaces
     source = surrogate.metadata.get("source", {})
     n = surfaces.n_nodes
     outputs = {"positions": [None, n, 3], **({"elbow_angle_deg": [None, 1]} if surrogate.has_angle else {})}
     inputs = {"activations": [None, 5], **({LOAD_INPUT: [None, 1]} if takes_load else {})}
     models = {"deformation": {"inputs": inputs, "optional_inputs": {LOAD_INPUT: 0.0} if takes_load else {}, "outputs": outputs,
-                              "variants": variants, "architecture": surrogate.metadata.get("arch"),
+                              **files, "architecture": surrogate.metadata.get("arch"),
                               "parameters": surrogate.metadata.get("parameters"), "accuracy": accuracy or {}}}
     if activation_model is not None:
         models["activation_angle"] = _export_activation_model(activation_model, tmp)

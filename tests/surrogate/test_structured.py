@@ -131,6 +131,7 @@ def _moment_graph(model):
 
 
 def test_export_runs_in_onnxruntime_with_and_without_the_load(fitted, tmp_path):
+    import onnx
     import onnxruntime as ort
 
     from persival.deploy.export import export_model
@@ -156,6 +157,19 @@ def test_export_runs_in_onnxruntime_with_and_without_the_load(fitted, tmp_path):
     heavy_positions, heavy = fitted.predict_with_angle(alpha, 2.0)
     assert np.abs(loaded_angle[:, 0] - heavy).max() < 1e-3 and np.abs(loaded - heavy_positions).max() < 0.05
     assert np.all(heavy <= angles + 1e-9)  # a load in the hand never flexes the elbow further
+    # the same graph with the load a required input, for onnxruntime-web (it cannot feed the optional one)
+    variant = deformation["load_variant"]
+    path = tmp_path / "export" / variant["file"]
+    assert variant["file"] == "deformation_load.onnx" and variant["bytes"] == path.stat().st_size
+    assert variant["inputs"] == {"activations": [None, 5], "load_kg": [None, 1]}
+    assert variant["max_abs_diff_vs_torch"]["positions"] <= again.export_tolerance_mm
+    required = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+    assert [i.name for i in required.get_inputs()] == ["activations", "load_kg"]
+    assert "load_kg" not in {init.name for init in onnx.load(str(path)).graph.initializer}  # no default: required
+    with pytest.raises(Exception, match="load_kg"):
+        required.run(None, {"activations": alpha.astype(np.float32)})
+    fed, fed_angle = required.run(None, {"activations": alpha.astype(np.float32), "load_kg": np.full((16, 1), 2.0, np.float32)})
+    assert np.abs(fed - loaded).max() <= 1e-5 and np.abs(fed_angle - loaded_angle).max() <= 1e-5
 
 
 def test_states_of_another_model_are_refused(surfaces):

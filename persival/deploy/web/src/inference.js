@@ -22,7 +22,13 @@ export class LocalEngine {
     this.meta = meta;
     this.sessions = new Map();
     this.input = new Float32Array(5);
-    this.takesLoad = false; // set by loadInput()
+    this.zero = new Float32Array(1);
+    // An export whose deformation graph takes the load also lists `load_variant`
+    // (deformation_load.onnx: the same graph with `load_kg` a required input). onnxruntime-web
+    // cannot feed deformation.onnx's optional load (an input backed by an initializer), so the
+    // float32 tier runs that file instead, and is always fed the load (0 kg when none).
+    this.loadVariant = meta.models.deformation.load_variant ?? null;
+    this.takesLoad = Boolean(this.loadVariant); // else set by loadInput()
   }
 
   async session(file) {
@@ -36,31 +42,43 @@ export class LocalEngine {
     return this.sessions.get(file);
   }
 
-  variantFile(tier) { return this.meta.models.deformation.variants[tier].file; }
+  // The file a tier runs: float32 is the required-load file where the export has one (only that
+  // one is downloaded), else deformation.onnx.
+  variantFile(tier) {
+    const d = this.meta.models.deformation;
+    return tier === 'float32' && d.load_variant ? d.load_variant.file : d.variants[tier].file;
+  }
 
-  // Whether the float32 deformation graph can be fed `load_kg`: onnxruntime-web accepts only the
-  // graph's true inputs, so an optional input backed by an initializer (0 kg) cannot be fed here.
+  // Whether the float32 deformation graph is fed `load_kg`: always with the load variant; else only
+  // where deformation.onnx has it as a true input (onnxruntime-web accepts only the graph's true
+  // inputs, so an optional input backed by an initializer, 0 kg, cannot be fed here).
   async loadInput() {
     if (!('load_kg' in (this.meta.models.deformation.inputs || {}))) return false;
     this.takesLoad = (await this.session(this.variantFile('float32'))).inputNames.includes('load_kg');
     return this.takesLoad;
   }
 
+  // `load_kg` [1, 1] for a float32 graph that takes it (it broadcasts over the batch), else none.
+  loadFeed(tier, load) {
+    if (!(this.takesLoad && tier === 'float32')) return {};
+    return { load_kg: new ort.Tensor('float32', load ? new Float32Array([load]) : this.zero, [1, 1]) };
+  }
+
   // load (kg): fed to a deformation graph that takes it (`load_kg`, a model that solves the
-  // elbow's equilibrium with the load in the hand); other graphs have no such input.
+  // elbow's equilibrium with the load in the hand; 0 kg when none); other graphs have no such input.
   async deform(activations, tier = 'float32', load = 0) {
     const s = await this.session(this.variantFile(tier));
     this.input.set(activations);
-    const feeds = { activations: new ort.Tensor('float32', this.input, [1, 5]) };
-    if (this.takesLoad && tier === 'float32') feeds.load_kg = new ort.Tensor('float32', new Float32Array([load]), [1, 1]);
-    const out = await s.run(feeds);
+    const out = await s.run({ activations: new ort.Tensor('float32', this.input, [1, 5]), ...this.loadFeed(tier, load) });
     const angle = out.elbow_angle_deg ? out.elbow_angle_deg.data[0] : NaN; // optional output
     return { positions: out.positions.data, angle, activations: this.input };
   }
 
+  // Positions of a batch of activations (flat, 5 per state), without a load.
   async deformBatch(flat, tier = 'float32') {
     const s = await this.session(this.variantFile(tier));
-    const out = await s.run({ activations: new ort.Tensor('float32', Float32Array.from(flat), [flat.length / 5, 5]) });
+    const activations = new ort.Tensor('float32', Float32Array.from(flat), [flat.length / 5, 5]);
+    const out = await s.run({ activations, ...this.loadFeed(tier, 0) });
     return out.positions.data;
   }
 

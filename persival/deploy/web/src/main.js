@@ -9,8 +9,10 @@
 // deformation model has no load input, and fed the loaded activations the unloaded arm would flex
 // past the target (the 143-degree jump of a 2 kg load at 90 degrees). A deformation model that
 // takes the load (`load_kg`: it solves the elbow's equilibrium with the load in the hand) is fed
-// the static effort and the load instead, and draws the loaded arm. The drawn state's elbow
-// angle is the "achieved" angle; a load the muscles cannot hold at an angle is refused.
+// the static effort and the load instead, and draws the loaded arm; in the browser it runs from
+// the export's `load_variant` (deformation_load.onnx, the load a required input: see inference.js).
+// The drawn state's elbow angle is the "achieved" angle; a load the muscles cannot hold at an
+// angle is refused.
 import { ArmScene } from './scene.js';
 import { LocalEngine, ServerEngine, configureOrt } from './inference.js';
 import { calibrate, choose, Monitor, INFERENCE_BUDGET_MS } from './auto.js';
@@ -37,7 +39,8 @@ class Viewer {
     // The angle controls need the activation model; without it only the sliders drive the arm.
     this.hasAngleModel = Boolean(this.meta.models.activation_angle);
     this.hasMotion = Boolean(this.meta.models.activation_motion);
-    // a deformation model with a load input draws the loaded arm itself (see drawnFor)
+    // a deformation model with a load input the browser can feed (the export's load variant, or a
+    // true input of deformation.onnx) draws the loaded arm itself (see drawnFor)
     this.loadInput = this.hasMotion && await this.local.loadInput();
     this.range = this.angleRange();
     this.tiers = Object.keys(this.meta.models.deformation.variants);
@@ -339,10 +342,18 @@ const viewer = new Viewer();
 viewer.hud = ui.hud();
 const ready = viewer.start().catch((e) => { ui.status(`could not start: ${e.message || e}`, true); throw e; });
 
+// The in-browser float32 state for activations and a load (kg): a load only for a deformation
+// model the browser can feed it to, else refused.
+async function localState(a, loadKg) {
+  if (loadKg && !viewer.local.takesLoad) throw new Error('the in-browser deformation model takes no load');
+  return viewer.local.deform(Float32Array.from(a), 'float32', loadKg);
+}
+
 window.persival = {
   ready,
   viewer,
-  async predict(a) { return Float32Array.from((await viewer.local.deform(Float32Array.from(a), 'float32')).positions); },
+  async predict(a, loadKg = 0) { return Float32Array.from((await localState(a, loadKg)).positions); },
+  async predictAngle(a, loadKg = 0) { return (await localState(a, loadKg)).angle; },
   async predictServer(a) { return Float32Array.from((await viewer.server.deform(Float32Array.from(a), 'float32')).positions); },
   setActivations: (a) => viewer.setActivations(a),
   setAngle: (deg, load) => viewer.setAngle(deg, load),
