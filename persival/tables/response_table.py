@@ -51,8 +51,10 @@ DEFAULT_ANGLES = tuple(float(a) for a in np.arange(-10.0, 185.0 + 1e-9, 5.0))
 # continuation in a, only the re-solve at the equilibrium angle; and below 0.25 four more, where
 # a flexor goes from hanging slack to taut and its moment is far from linear in a (the biceps at
 # 80 to 100 deg and a = 0.02 to 0.15: cubic interpolation over 0, 0.25, 0.5 missed its moment by
-# 200 to 370 N mm, moving the elbow angle by up to 4.6 deg; docs/fe_tables.md)
-DEFAULT_LEVELS = (0.0, 0.03125, 0.0625, 0.125, 0.1875, 0.25, 0.5, 0.75, 1.0)
+# 200 to 370 N mm, moving the elbow angle by up to 4.6 deg; docs/fe_tables.md); and above 0.25
+# steps of 1/8: over steps of 1/4 a muscle's moment between levels was off by up to 51 N mm (the
+# biceps at a = 0.33 and 125 deg, 200 exact states), 1.4 deg where the net moment is flat
+DEFAULT_LEVELS = (0.0, 0.03125, 0.0625, 0.125, 0.1875, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875, 1.0)
 
 
 def default_table_dir(arm) -> Path:
