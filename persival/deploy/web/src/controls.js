@@ -87,6 +87,7 @@ export function setupControls(v) {
   for (const b of document.querySelectorAll('#backend button')) b.addEventListener('click', () => v.setMode(b.dataset.mode));
 
   setupAR(v);
+  let drawnDeg = null; // the angle last drawn: with the activation sliders driving, the model's answer
   return {
     play,
     setLoad,
@@ -96,11 +97,13 @@ export function setupControls(v) {
       activations.forEach((a, i) => sliders[i].set(a));
       angle.value = String(v.state.driver === 'angle' && !v.playing && !v.player.playing ? v.state.angle : deg);
       angleOut.value = `${deg.toFixed(0)}°`;
+      drawnDeg = deg;
     },
     // "holds at most X kg at Y°" under the load control, unless a refusal is still on screen
     showLoad() {
       if (!v.holdable || performance.now() - refusedAt < 4000) return;
-      const deg = v.state.angle, held = v.held(deg);
+      // the angle on screen: the one asked for, or the one the activation sliders give
+      const deg = v.state.driver === 'angle' || drawnDeg === null ? v.state.angle : drawnDeg, held = v.held(deg);
       note(held < 0 ? `at ${deg.toFixed(0)}° not even the unloaded arm is held` :
         `at ${deg.toFixed(0)}° the muscles hold at most ${held.toFixed(2)} kg`);
     },
