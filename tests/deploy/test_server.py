@@ -412,7 +412,7 @@ def _broken(export_dir: Path, tmp_path: Path, how: str) -> Path:
 
 
 @pytest.mark.parametrize("how, words", [
-    ("no metadata", "metadata.json: missing"), ("bad json", "not valid JSON"), ("version", "format_version 99"),
+    ("no metadata", "metadata.json: missing"), ("bad json", "not valid JSON"), ("version", "format version 99"),
     ("missing model", "deformation.float16.onnx: file missing"), ("corrupt model", "not a loadable ONNX"),
     ("node count", "do not belong together")])
 def test_broken_artifacts_are_reported(export_dir, tmp_path, how, words):
