@@ -171,7 +171,8 @@ def structured(out: Path, config, console) -> dict:
     from persival.surrogate.dataset import Dataset
     from persival.surrogate.stage import fit_structured
 
-    surrogate = fit_structured(out / "campaign" / "held_out.zarr", out / "structured", config.profile)
+    surrogate = fit_structured(out / "campaign" / "held_out.zarr", out / "structured", config.profile,
+                                config.model)
     meta = surrogate.metadata
     held = Dataset.from_store(out / "campaign" / "held_out.zarr")
     positions, angles = surrogate.predict_with_angle(held.activations)

@@ -61,7 +61,8 @@ class ResponseTableSurrogate(Surrogate):
         arm = self.solver.arm
         if dataset.model_hash is not None and dataset.model_hash != arm.model_hash:
             raise ValueError(f"the dataset's states come from model {dataset.model_hash[:12]}, the response tables "
-                             f"from model {arm.model_hash[:12]}: fit on states of the same arm")
+                             f"from model {arm.model_hash[:12]}: fit on states of the same arm "
+                             "(the model file of their campaign: --model)")
         ids = []
         for name, count in zip(dataset.surfaces.names, dataset.surfaces.node_counts):
             if name not in arm.units:

@@ -68,7 +68,8 @@ class StructuredSurrogate(Surrogate):
         arm = ArmModel(self.model_file, self.profile)
         if dataset.model_hash is not None and dataset.model_hash != arm.model_hash:
             raise ValueError(f"the dataset's states come from model {dataset.model_hash[:12]}, the response tables "
-                             f"from model {arm.model_hash[:12]}: fit on states of the same arm")
+                             f"from model {arm.model_hash[:12]}: fit on states of the same arm "
+                             "(the model file of their campaign: --model)")
         table = open_tables(arm, self.tables)
         moment_table = table.moment_table()
         self.moments = MomentModel.from_table(moment_table, arm.spec, arm.base_state().elbow_angle_deg)
