@@ -56,7 +56,7 @@ class RunConfig:
 
 #: (name, what it does, the stages whose artifacts it reads)
 STAGES = [
-    ("model", "validate and mesh the built-in arm", []),
+    ("model", "validate and mesh the arm of the model file", []),
     ("tables", "the FE arm's per-muscle response tables (built once per model)", []),
     ("fe", "three FE equilibria of the arm (hanging, biceps 0.5, flexors 1)", ["model", "tables"]),
     ("campaign", "sparse-grid campaign + random held-out states", ["tables"]),

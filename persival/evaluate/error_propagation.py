@@ -101,7 +101,7 @@ def error_propagation_table(run: LoadedRun, n_states: int = 25) -> dict:
     notes = [f"Truth: {label} ({layout.held_out}); the SG's support points: the campaign's own states "
              f"({layout.campaign}).",
              "'MAE vs SG's %': how much the network's mean MAE against the truth exceeds the SG's own on the "
-             "same states (issue 13 asks at most +10 %)."]
+             "same states (the target: at most +10 %)."]
     if layout.campaign.exists():
         support = _truth(layout.campaign, run.sg, None)
         on = f"{len(support)} SG support points"

@@ -1,4 +1,4 @@
-"""The FE arm's response tables as a surrogate (issue 17): five 2-D interpolations and one root.
+"""The FE arm's response tables as a surrogate: five 2-D interpolations and one root.
 
 Beyond the paper: instead of one 5-D sparse grid over the activations, each muscle's states are
 tabulated over its own two variables (elbow angle, own activation; persival.tables.response_table)

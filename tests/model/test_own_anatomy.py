@@ -245,6 +245,27 @@ def test_a_model_file_enters_the_run_digests_only_when_given():
     assert "model_hash" not in _stage_inputs("sg", own, {})["settings"]
 
 
+def test_the_run_fits_the_deployed_model_to_its_own_model_file(monkeypatch, tmp_path):
+    """`persival run --model FILE`: the structured stage reads the tables of FILE's arm (it used the
+    built-in arm's and refused the campaign's states as another model's)."""
+    from rich.console import Console
+
+    import persival.surrogate.stage as stage
+    from persival import stages
+    from persival.pipeline import RunConfig
+
+    seen = {}
+
+    def fit_structured(store, out, profile="quick", model_file=None, tables=None, tolerance_mm=0.05, progress=None):
+        seen.update(profile=profile, model_file=model_file)
+        raise RuntimeError("fitted")
+
+    monkeypatch.setattr(stage, "fit_structured", fit_structured)
+    with pytest.raises(RuntimeError, match="fitted"):
+        stages.structured(tmp_path, RunConfig(profile="coarse", model="/data/my_arm.toml"), Console(quiet=True))
+    assert seen == {"profile": "coarse", "model_file": "/data/my_arm.toml"}
+
+
 def test_a_fin_on_an_edge_is_removed_and_counted():
     """A stray triangle on an edge of the surface (three triangles on one edge: non-manifold) goes,
     not one of the surface's own; what is left is the clean spindle."""
