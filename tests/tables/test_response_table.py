@@ -1,10 +1,12 @@
-"""Response tables of the FE arm and the states solved from them (issue 17; SPEC 3.3, 8).
+"""Response tables of the FE arm and the states solved from them (docs/fe_tables.md).
 
 The agreement checks read ``tests/data/response_table_coarse``: the coarse-profile table built by
 ``persival tables --profile coarse --angles 0:160:20 --levels 0,0.5,1 --out ...`` (about 4 min on
 2 cores, so a fixture; it is keyed by model hash and mesh, and the checks skip with a message
 when the model changed). The build, its kill-and-resume and its refusals are tested on a small
-real table computed here.
+real table computed here. The exact path against the direct coupled solve (every muscle off the
+table's levels) is tests/model/test_arm_solve.py's, the cached and table-found hanging arm
+tests/tables/test_hanging_arm_cache.py's.
 """
 
 from __future__ import annotations
@@ -18,7 +20,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from persival.model.arm import ArmModel
 from persival.tables.moment_table import TableMismatchError
 from persival.tables.response_table import ResponseTable, build_response_table
 from persival.tables.table_solve import OutsideTableError, TableSolver
@@ -37,26 +38,6 @@ def arm(coarse_arm):
 @pytest.fixture(scope="module")
 def solver(arm, coarse_table):
     return TableSolver(arm, coarse_table)
-
-
-@pytest.mark.slow
-def test_exact_path_is_the_direct_coupled_solve(arm, solver, capsys):
-    """Same converged FE state for an off-level activation vector (Newton from a level's state):
-    theta within 0.05 deg and every node within 0.01 mm (issue 17; on-level: tests/test_arm_solve.py)."""
-    hanging = arm.base_state()
-    rng = np.random.default_rng(3)
-    for alpha in (rng.uniform(0.0, 1.0, 5),):
-        exact = solver.solve(alpha, near_deg=hanging.elbow_angle_deg)
-        direct = arm.solve(alpha)
-        node_error = np.abs(exact.displacement - direct.displacement).max()
-        with capsys.disabled():
-            print(f"\nalpha {alpha.round(3)}: tables {exact.elbow_angle_deg:.5f} deg in {exact.wall_time_s:.1f} s "
-                  f"({exact.statistics['table_start']}), direct {direct.elbow_angle_deg:.5f} deg in "
-                  f"{direct.wall_time_s:.1f} s, largest node difference {node_error:.2e} mm")
-        assert abs(exact.elbow_angle_deg - direct.elbow_angle_deg) < 0.05
-        assert node_error < 0.01
-        assert abs(exact.moment_residual) <= arm.moment_tolerance(exact.muscle_states)
-        assert exact.max_volume_change < 0.01
 
 
 def test_joint_converges_to_the_relative_tolerance_without_an_absolute_one(arm, solver):
@@ -194,37 +175,6 @@ def test_foreign_or_unfinished_tables_are_refused(arm, tmp_path):
         build_response_table(arm, tmp_path / "stuff", angles=[55.0, 60.0], levels=[0.0, 1.0], scheduler="inline")
     with pytest.raises(FileNotFoundError, match="no response table"):
         ResponseTable.open(tmp_path / "nothing")
-
-
-def test_rest_state_comes_from_the_cache_the_second_time(arm):
-    """The hanging arm continued from the mesh poses (no cache) and the one re-converged from the
-    cache (the test run's cache starts with the fixture of tests/data/state_cache) agree."""
-    first = ArmModel(profile="coarse").base_state(cache=False)
-    assert not first.statistics["from_cache"]
-    again = ArmModel(profile="coarse")
-    second = again.base_state()
-    assert second.statistics["from_cache"]
-    assert abs(second.elbow_angle_deg - first.elbow_angle_deg) < 1e-6
-    assert np.abs(second.displacement - first.displacement).max() < 1e-6
-    assert second.statistics["iterations"] <= 10  # at most a Newton iteration or two per muscle
-
-
-def test_hanging_arm_from_the_tables_is_the_direct_one(arm, solver, tmp_path, monkeypatch):
-    """ensure_tables caches the rest states first (the table workers need them), then the hanging
-    arm by the tables' exact path: the same FE equilibrium as the continuation from the mesh poses."""
-    from persival.tables.open import hanging_from_tables
-
-    direct = arm.base_state()
-    monkeypatch.setenv("PERSIVAL_CACHE", str(tmp_path))
-    fresh = ArmModel(profile="coarse")
-    fresh.rest_states()
-    assert fresh.load_cached_rest_states() and not fresh.has_cached_base()  # rest states only, no hanging arm yet
-    state = hanging_from_tables(fresh, solver.table)
-    assert abs(state.elbow_angle_deg - direct.elbow_angle_deg) < 1e-4
-    assert np.abs(state.displacement - direct.displacement).max() < 1e-3
-    assert abs(state.moment_residual) <= arm.moment_tolerance(state.muscle_states)
-    again = ArmModel(profile="coarse").base_state()
-    assert again.statistics["from_cache"] and abs(again.elbow_angle_deg - state.elbow_angle_deg) < 1e-6
 
 
 def test_sensitivity_is_the_slope_of_the_equilibrium(arm):
