@@ -316,9 +316,26 @@ def evaluate(out: Path, config, console) -> dict:
     from persival.evaluate.stage import evaluate_run
 
     result = evaluate_run(out, progress=True, console=console, n_states=config.held_out, bench=config.bench)
+    if config.bench:
+        result.setdefault("skipped", {}).update(_viewer_screenshot(out, console))
     for name, why in result.get("skipped", {}).items():
         console.print(f"  [yellow]skipped[/yellow] {name}: {why}")
     return {"tables": sorted(result["tables"]), "figures": sorted(result["figures"]), "skipped": result.get("skipped", {})}
+
+
+def _viewer_screenshot(out: Path, console) -> dict:
+    """The viewer's default view for the report (evaluate/viewer.png), with its frame rate: a
+    short `persival bench viewer`. Where there is no Chromium, a note says how to get one."""
+    from persival.deploy.bench_viewer import ViewerBenchError, run_viewer_bench
+
+    shot = out / "evaluate" / "viewer.png"
+    try:
+        result = run_viewer_bench(out / "export", seconds=2.0, trace=False, warmup=1.0, screenshot=shot)
+    except ViewerBenchError as exc:
+        return {"viewer screenshot": f"{exc}"}
+    shipped = result["phases"][0]
+    console.print(f"  viewer: {shot} ({shipped['fps']:.0f} fps in headless Chromium, software GL)")
+    return {}
 
 
 def report(out: Path, config, console) -> dict:

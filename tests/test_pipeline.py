@@ -35,3 +35,18 @@ def test_run_end_to_end_resumes_stage_by_stage(tmp_path):
     for name in ("model", "campaign", "sg", "inverse", "data"):
         assert "(unchanged, skipped)" in log.split(f" {name}: ")[1].split("\n")[0], name
     assert "(unchanged, skipped)" not in log.split(" train: ")[1].split("\n")[0]
+
+
+def test_the_viewer_screenshot_is_skipped_with_a_note_where_there_is_no_browser(tmp_path, monkeypatch):
+    """The evaluate stage's viewer picture: without Chromium the run goes on and says why."""
+    from rich.console import Console
+
+    import persival.deploy.bench_viewer as bench_viewer
+    from persival import stages
+
+    def no_browser(*args, **kwargs):
+        raise bench_viewer.ViewerBenchError("missing: Chromium at /usr/bin/chromium (apt-get install chromium)")
+
+    monkeypatch.setattr(bench_viewer, "run_viewer_bench", no_browser)
+    skipped = stages._viewer_screenshot(tmp_path, Console(quiet=True))
+    assert "apt-get install chromium" in skipped["viewer screenshot"]

@@ -213,10 +213,14 @@ def test_bench_viewer_command(export_dir, tmp_path):  # noqa: F811
 
     from persival.cli import app
 
-    out = tmp_path / "bench.json"
+    out, shot = tmp_path / "bench.json", tmp_path / "viewer.png"
     result = CliRunner().invoke(app, ["bench", "viewer", "--artifacts", str(export_dir), "--seconds", "2",
-                                      "--no-trace", "--json", str(out)])
+                                      "--no-trace", "--json", str(out), "--screenshot", str(shot)])
     assert result.exit_code == 0, result.output
+    from PIL import Image
+
+    image = np.asarray(Image.open(shot).convert("RGB")).astype(float)
+    assert image.shape[:2] == (800, 1280) and (image.std(axis=2) > 20).mean() > 0.01  # the coloured arm drawn
     bench = json.loads(out.read_text())
     assert [p["phase"] for p in bench["phases"]] == ["shipped (adaptive)", "full resolution"]
     shipped, full = bench["phases"]
