@@ -315,7 +315,7 @@ def test_solve_retries_with_smaller_steps_then_names_every_reason(arm, states, m
 
     before = arm.options
     monkeypatch.setattr(arm, "_equilibrium", flaky)
-    state = arm.solve([0.5, 0, 0, 0, 0], warm_start=states[1])
+    state = arm.solve(DIRECT, warm_start=states[1])  # from its own equilibrium: the ladder, not the physics, costs
     assert state.statistics["tries"] == 2 and steps == [before.initial_step, before.initial_step / 2]
     assert arm.options == before
 
