@@ -8,22 +8,11 @@ import numpy as np
 import pytest
 
 from persival.model.arm import ArmModel
-from persival.tables.table_solve import TableSolver
 
 pytestmark = pytest.mark.slow  # continuations from the mesh poses take minutes (make test-fast skips it)
 
 
-@pytest.fixture(scope="module")
-def arm(coarse_arm):
-    return coarse_arm
-
-
-@pytest.fixture(scope="module")
-def solver(arm, coarse_table):
-    return TableSolver(arm, coarse_table)
-
-
-def test_rest_state_comes_from_the_cache_the_second_time(arm):
+def test_rest_state_comes_from_the_cache_the_second_time():
     """The hanging arm continued from the mesh poses (no cache) and the one re-converged from the
     cache (the test run's cache starts with the fixture of tests/data/state_cache) agree."""
     first = ArmModel(profile="coarse").base_state(cache=False)
@@ -36,19 +25,19 @@ def test_rest_state_comes_from_the_cache_the_second_time(arm):
     assert second.statistics["iterations"] <= 10  # at most a Newton iteration or two per muscle
 
 
-def test_hanging_arm_from_the_tables_is_the_direct_one(arm, solver, tmp_path, monkeypatch):
+def test_hanging_arm_from_the_tables_is_the_direct_one(coarse_arm, coarse_table, tmp_path, monkeypatch):
     """ensure_tables caches the rest states first (the table workers need them), then the hanging
     arm by the tables' exact path: the same FE equilibrium as the continuation from the mesh poses."""
     from persival.tables.open import hanging_from_tables
 
-    direct = arm.base_state()
+    direct = coarse_arm.base_state()
     monkeypatch.setenv("PERSIVAL_CACHE", str(tmp_path))
     fresh = ArmModel(profile="coarse")
     fresh.rest_states()
     assert fresh.load_cached_rest_states() and not fresh.has_cached_base()  # rest states only, no hanging arm yet
-    state = hanging_from_tables(fresh, solver.table)
+    state = hanging_from_tables(fresh, coarse_table)
     assert abs(state.elbow_angle_deg - direct.elbow_angle_deg) < 1e-4
     assert np.abs(state.displacement - direct.displacement).max() < 1e-3
-    assert abs(state.moment_residual) <= arm.moment_tolerance(state.muscle_states)
+    assert abs(state.moment_residual) <= coarse_arm.moment_tolerance(state.muscle_states)
     again = ArmModel(profile="coarse").base_state()
     assert again.statistics["from_cache"] and abs(again.elbow_angle_deg - state.elbow_angle_deg) < 1e-6
