@@ -128,16 +128,14 @@ def fe(out: Path, config, console) -> dict:
 
 def campaign(out: Path, config, console) -> dict:
     """The SG design campaign and the random held-out states, or links to finished stores."""
+    from persival.campaign.arm_simulator import arm_spec
     from persival.campaign.design import Design
     from persival.campaign.runner import INLINE, run_campaign
     from persival.campaign.simulator import SimulatorSpec
     from persival.campaign.store import CampaignStore
 
     folder = out / "campaign"
-    options = {"profile": config.profile, "method": "tables"} if config.simulator == "arm" else {}
-    if config.simulator == "arm" and config.model is not None:
-        options["model_file"] = config.model
-    spec = SimulatorSpec(config.simulator, options)
+    spec = arm_spec(config.profile, "tables", config.model) if config.simulator == "arm" else SimulatorSpec(config.simulator)
     stores = {}
     for name, given, design in (("campaign", config.campaign_store, Design.sparse_grid(config.level)),
                                 ("held_out", config.held_out_store, Design.random(config.held_out, seed=config.seed + 1))):
@@ -153,7 +151,7 @@ def campaign(out: Path, config, console) -> dict:
         path = folder / "held_out_table_only.zarr"
         with CampaignStore.open(folder / "held_out.zarr") as held:
             design = held.design
-        run_campaign(path, design, SimulatorSpec("arm", {**options, "method": "interpolate"}), scheduler=INLINE,
+        run_campaign(path, design, arm_spec(config.profile, "interpolate", config.model), scheduler=INLINE,
                      progress=False)
         with CampaignStore.open(path) as store:
             stores["held_out_table_only"] = {"path": str(path), **store.summary()}

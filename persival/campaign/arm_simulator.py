@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from persival.campaign.simulator import ReferenceGeometry, SimulationResult, SurfaceTopology
+from persival.campaign.simulator import ReferenceGeometry, SimulationResult, SimulatorSpec, SurfaceTopology
 from persival.model.arm import ArmModel, ArmState
 from persival.model.mesh import Tet10Mesh
 from persival.model.output import muscle_submesh
@@ -111,6 +111,15 @@ class ArmSimulator:
         x = self.arm.mesh.points + u
         return SimulationResult(elbow_angle_deg=theta, surfaces={name: x[ids] for name, (ids, _) in self.surfaces.items()},
                                 statistics={"path": "interpolate"}, wall_time_s=time.perf_counter() - t0)
+
+
+def arm_spec(profile: str, method: str = "tables", model_file: str | None = None) -> SimulatorSpec:
+    """The FE arm's simulator spec; ``model_file`` only when given, so that a built-in-arm store
+    keeps the spec (and digest) it was created with."""
+    options = {"profile": profile, "method": method}
+    if model_file is not None:
+        options["model_file"] = str(model_file)
+    return SimulatorSpec("arm", options)
 
 
 def prepare_spec(spec, progress=None, scheduler: str | None = None, n_workers: int | None = None):

@@ -27,9 +27,9 @@ def _summary(positions, angles, truth) -> dict:
 
 
 def run_deployed_benchmark(run: str | Path, states: int = 200, seed: int = 11, progress: bool = True) -> dict:
+    from persival.campaign.arm_simulator import arm_spec
     from persival.campaign.design import Design
     from persival.campaign.runner import run_campaign
-    from persival.campaign.simulator import SimulatorSpec
     from persival.deploy.held_out import held_out_accuracy
     from persival.evaluate.run_layout import load_run
     from persival.surrogate.dataset import Dataset
@@ -39,12 +39,9 @@ def run_deployed_benchmark(run: str | Path, states: int = 200, seed: int = 11, p
         raise FileNotFoundError(f"{loaded.layout.structured}: this run has no structured surrogate (an FE-arm run makes one)")
     profile = loaded.structured.profile
     store = loaded.layout.root / "bench" / f"exact_{states}_seed{seed}.zarr"
-    options = {"profile": profile}
-    if loaded.structured.model_file is not None:  # a run of the user's own model file
-        options["model_file"] = loaded.structured.model_file
+    model_file = loaded.structured.model_file  # None: the built-in arm
     t0 = time.perf_counter()
-    run_campaign(store, Design.random(states, seed=seed), SimulatorSpec("arm", {**options, "method": "tables"}),
-                 progress=progress)
+    run_campaign(store, Design.random(states, seed=seed), arm_spec(profile, "tables", model_file), progress=progress)
     solve_s = time.perf_counter() - t0
     truth = Dataset.from_store(store).select(list(loaded.structured.surfaces.names))
     rows = {}
@@ -61,7 +58,7 @@ def run_deployed_benchmark(run: str | Path, states: int = 200, seed: int = 11, p
         rows["POD network"] = _summary(*loaded.networks["pod"].predict_with_angle(truth.activations), truth)
     table_only = loaded.layout.root / "bench" / f"exact_{states}_seed{seed}_table_only.zarr"
     run_campaign(table_only, Design.random(states, seed=seed),
-                 SimulatorSpec("arm", {**options, "method": "interpolate"}), scheduler="inline", progress=False)
+                 arm_spec(profile, "interpolate", model_file), scheduler="inline", progress=False)
     interpolated = Dataset.from_store(table_only).select(list(truth.surfaces.names))
     rows["FE tables, table-only"] = _summary(interpolated.positions, interpolated.elbow_angles, truth)
     return {"run": str(run), "states": len(truth), "seed": seed, "profile": profile, "store": str(store),

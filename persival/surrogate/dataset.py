@@ -133,6 +133,13 @@ class Dataset:
     def model_hash(self) -> str | None:
         return self.source.get("model_hash")
 
+    def require_model(self, model_hash: str) -> None:
+        """Refuse states of another arm model than the response tables' (``model_hash``)."""
+        if self.model_hash is not None and self.model_hash != model_hash:
+            raise ValueError(f"the dataset's states come from model {self.model_hash[:12]}, the response tables "
+                             f"from model {model_hash[:12]}: fit on states of the same arm "
+                             "(the model file of their campaign: --model)")
+
     def subset(self, rows) -> Dataset:
         rows = np.asarray(rows)
         return Dataset(self.activations[rows], self.positions[rows], self.elbow_angles[rows], self.surfaces,

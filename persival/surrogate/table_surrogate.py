@@ -59,10 +59,7 @@ class ResponseTableSurrogate(Surrogate):
         from persival.campaign.arm_simulator import muscle_surface
 
         arm = self.solver.arm
-        if dataset.model_hash is not None and dataset.model_hash != arm.model_hash:
-            raise ValueError(f"the dataset's states come from model {dataset.model_hash[:12]}, the response tables "
-                             f"from model {arm.model_hash[:12]}: fit on states of the same arm "
-                             "(the model file of their campaign: --model)")
+        dataset.require_model(arm.model_hash)
         ids = []
         for name, count in zip(dataset.surfaces.names, dataset.surfaces.node_counts):
             if name not in arm.units:

@@ -66,10 +66,7 @@ class StructuredSurrogate(Surrogate):
                              f"states of the {simulator!r} simulator (use a campaign of the arm)")
         t0 = time.perf_counter()
         arm = ArmModel(self.model_file, self.profile)
-        if dataset.model_hash is not None and dataset.model_hash != arm.model_hash:
-            raise ValueError(f"the dataset's states come from model {dataset.model_hash[:12]}, the response tables "
-                             f"from model {arm.model_hash[:12]}: fit on states of the same arm "
-                             "(the model file of their campaign: --model)")
+        dataset.require_model(arm.model_hash)
         table = open_tables(arm, self.tables)
         moment_table = table.moment_table()
         self.moments = MomentModel.from_table(moment_table, arm.spec, arm.base_state().elbow_angle_deg)
