@@ -138,6 +138,9 @@ CASES = [
     ("model init", ["--out", "afile"], "existing file (never overwritten)", "exists; pick a new name"),
     ("model init", ["--out", "folder"], "folder where a file is expected", "is a folder, not a file"),
     ("mesh", ["--model", "hole.toml", "--out", "new"], "surface with a large hole", "open surface with a hole"),
+    ("mesh", ["--model", "overlap.toml", "--out", "new"], "outlines that overlap", "brachialis in biceps at 30 %"),
+    ("simulate", ["-a", "0,0,0,0,0", "--model", "overlap.toml", "--out", "new"], "outlines that overlap",
+     "brachialis in biceps at 30 %"),
     ("mesh", ["--model", "two.toml", "--out", "new"], "surface of two bodies", "2 disconnected bodies"),
     ("mesh", ["--model", "notmesh.toml", "--out", "new"], "surface file that is not a mesh", "not a triangle surface"),
     ("mesh", ["--model", "far.toml", "--out", "new"], "origin_point far from the surface", "from the surface"),
@@ -201,6 +204,10 @@ def workdir(tmp_path_factory):
     (root / "afile").write_text("not a folder\n")
     (root / "folder").mkdir()
     (root / "foreign.toml").write_text('name = "a table that is no arm"\n[bones]\nradius = 3\n')
+    from persival.model.defaults import default_model_path
+
+    atlas = (default_model_path().parent / "variants" / "atlas_arm.toml").read_text()
+    (root / "overlap.toml").write_text(atlas.replace("{ z = 81.7, centre = [-2.0, 21.0]", "{ z = 81.7, centre = [-2.0, 32.0]"))
     (root / "bad.csv").write_text("0.1,0.2,0.3,0.4,1.5\n")
     (root / "nan.csv").write_text("0.1,0.2,nan,0.4,0.5\n")
     run_campaign(root / "random.zarr", Design.random(3, seed=0), SimulatorSpec("analytic", {}), scheduler=INLINE, progress=False)

@@ -16,8 +16,8 @@ import numpy as np
 
 from persival.model.arm_file import Muscle, load_model_file
 from persival.model.assembly import MaterialField
-from persival.model.geometry import swept_solid_mesh
 from persival.model.mesh import Tet10Mesh
+from persival.model.muscle_sweep import Sweep, muscle_profile, outlined_centre_line, sweep_sections
 from persival.model.rotations import rotation_about
 from persival.model.state_cache import cached_mesh
 from persival.model.surface_muscle import place_muscle_surface, surface_muscle
@@ -26,41 +26,23 @@ from persival.model.wrapping import WrapCylinder
 __all__ = ["ArmBody", "ArmKinematics", "muscle_profile", "rotation_about"]
 
 
-def muscle_profile(muscle: Muscle, s: np.ndarray, length: float) -> tuple[np.ndarray, np.ndarray]:
-    """Radius and muscle fraction gamma_M along the normalized centre-line position s.
-
-    Pure tendon over the tendon lengths, a linear muscle-tendon blend over
-    ``transition_length`` (docs/theory.md, 1.5 mixture), then the belly. The radius rises from the
-    tendon's to 90 % of the belly's over 1.5 transition lengths (smoothstep) and bulges to the
-    full belly radius at the middle. Why so blunt: the muscle's sections are in series, so the
-    thinnest pure-muscle section bounds the force the whole unit can pull (0.3 MPa times its
-    area); a fusiform taper (sin(pi x)^(1/2) or ^(1/3)) left about 40 % of the belly's area
-    there, and a full biceps stalled at 72 N, 108 deg.
-    """
-    s_a = muscle.tendon_length[0] / length
-    s_b = 1.0 - muscle.tendon_length[1] / length
-    if s_b - s_a <= 3.0 * muscle.transition_length / length:
-        raise ValueError(f"muscle {muscle.name!r}: tendons and transitions are longer than the muscle ({length:.0f} mm)")
-    r_tendon = muscle.tendon_radius[0] + (muscle.tendon_radius[1] - muscle.tendon_radius[0]) * s
-    ramp = muscle.transition_length / length
-    depth = np.clip(np.minimum(s - s_a, s_b - s), 0.0, None)  # distance into the belly
-    z = np.clip(depth / (1.5 * ramp), 0.0, 1.0)
-    bulge = np.sin(np.pi * np.clip((s - s_a) / (s_b - s_a), 0.0, 1.0))
-    shape = (3.0 * z**2 - 2.0 * z**3) * (0.9 + 0.1 * bulge)
-    radius = r_tendon + (muscle.belly_radius - r_tendon) * shape
-    gamma = np.clip(depth / ramp, 0.0, 1.0)
-    return radius, gamma
-
-
 class ArmKinematics:
     """The joint's kinematics of a model file, without a mesh: where forearm points and the
     muscles' ends are at an elbow angle (enough to place bones and attachments)."""
 
-    def __init__(self, model_file: str | Path | None = None):
+    def __init__(self, model_file: str | Path | None = None, *, check_outlines: bool = True):
+        """``check_outlines``: refuse a model file whose muscles' outlines overlap (only files that
+        lay muscles out by outlines; ``persival anatomy --outlines`` reports them instead)."""
         self.spec, self.model_hash = load_model_file(model_file)
         joint = self.spec.joint
         self.axis = np.asarray(joint.axis, dtype=float) / np.linalg.norm(joint.axis)
         self.centre = np.asarray(joint.centre, dtype=float)
+        if check_outlines and any(m.outlines for m in self.spec.muscles):
+            # a layout drawn from an atlas is held to it: no outline overlaps another or the humerus
+            # (persival.model.cross_sections), before anything is meshed or written
+            from persival.model.cross_sections import check_outlines as refuse_overlaps
+
+            refuse_overlaps(self)
 
     def forearm_point(self, p: np.ndarray, theta_deg: float) -> np.ndarray:
         """A forearm-frame point (given at theta = 0) at elbow angle theta."""
@@ -103,7 +85,11 @@ class ArmKinematics:
 
 
     def centre_line(self, muscle: Muscle, stations: int = 33) -> np.ndarray:
-        """Stations along origin -> via points -> insertion in the muscle's mesh pose."""
+        """Stations along origin -> via points -> insertion in the muscle's mesh pose (through its
+        outlines' centres when it has outlines: persival.model.muscle_sweep)."""
+        if muscle.outlines:
+            return outlined_centre_line(muscle, np.asarray(muscle.origin, dtype=float),
+                                        self.body_end(muscle, muscle.mesh_angle_deg), stations)
         knots = np.array([muscle.origin, *muscle.via, self.body_end(muscle, muscle.mesh_angle_deg)])
         seg = np.linalg.norm(np.diff(knots, axis=0), axis=1)
         if np.any(seg <= 0):
@@ -125,6 +111,10 @@ class ArmKinematics:
     def centre_line_length(self, muscle: Muscle) -> float:
         """Length (mm) of the muscle's centre line in its mesh pose: the scale of its tissue layout."""
         return float(np.linalg.norm(np.diff(self.centre_line(muscle), axis=0), axis=1).sum())
+
+    def sweep(self, muscle: Muscle) -> Sweep:
+        """The built-in muscle's solid: its centre line and the section at each station."""
+        return sweep_sections(muscle, self.centre_line(muscle), self.centre_line_length(muscle))
 
 
 class ArmBody(ArmKinematics):
@@ -186,10 +176,8 @@ class ArmBody(ArmKinematics):
                 own = surface_muscle(muscle, self.surfaces[muscle.name], size)
                 mesh, length = own.mesh, own.fibres.length
             else:
-                line = self.centre_line(muscle)
                 length = self.centre_line_length(muscle)
-                radius, _ = muscle_profile(muscle, np.linspace(0.0, 1.0, len(line)), length)
-                mesh = swept_solid_mesh(line, radius, size)
+                mesh = self.sweep(muscle).mesh(size)
                 mesh.cell_data["laplace"] = np.full(mesh.n_cells, np.nan)
             if self.surfaces:
                 cell_data["laplace"].append(mesh.cell_data["laplace"])

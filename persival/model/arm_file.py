@@ -124,6 +124,22 @@ class Contact(_Strict):
     penalty: float = Field(1.0, gt=0, description="N/mm^3: contact pressure per mm of penetration (docs/theory.md, 3.5)")
 
 
+class Outline(_Strict):
+    """Where a muscle crosses the plane z = const of the upper-arm frame: an ellipse, as a
+    cross-sectional atlas of the arm draws it (docs/arm_model.md, "Muscles lofted through outlines")."""
+
+    z: float = Field(description="mm: height of the plane in the upper-arm frame (the hinge at 0)")
+    centre: tuple[float, float] = Field(description="mm: x, y of the ellipse's centre in that plane")
+    semi_axes: tuple[float, float] = Field(description="mm: the larger semi-axis (along angle_deg), then the smaller")
+    angle_deg: float = Field(0.0, description="direction of the larger semi-axis, from +x towards +y")
+
+    @model_validator(mode="after")
+    def _ordered_axes(self):
+        if min(self.semi_axes) <= 0 or self.semi_axes[0] < self.semi_axes[1]:
+            raise ValueError(f"semi_axes must be positive, the larger first (along angle_deg), got {self.semi_axes}")
+        return self
+
+
 class Muscle(_Strict):
     name: str
     action: Literal["flexor", "extensor"]
@@ -152,6 +168,10 @@ class Muscle(_Strict):
     origin_point: Vector | None = Field(None, description="near the origin end, in the surface's coordinates")
     insertion_point: Vector | None = Field(None, description="near the insertion end, in the surface's coordinates")
     scale_to_fit: bool = Field(False, description="uniform scale so the two points span origin to insertion")
+    # The belly's sections from an atlas (persival.model.muscle_sweep): the centre line runs through
+    # the outlines' centres and the sections are their ellipses; belly_radius and bow play no part.
+    outlines: list[Outline] = Field(default_factory=list, description="the belly's sections at heights of the "
+                                                                      "upper arm, in the humerus frame")
 
     @field_validator("tendon_radius", "tendon_length", "bulk_modulus")
     @classmethod
@@ -179,6 +199,22 @@ class Muscle(_Strict):
         if self.surface is not None and (self.origin_point is None or self.insertion_point is None):
             raise ValueError(f"muscle {self.name!r}: a surface needs origin_point and insertion_point (in the surface's "
                              "coordinates, near its two ends)")
+        return self
+
+    @model_validator(mode="after")
+    def _outlines_alone(self):
+        if not self.outlines:
+            return self
+        clash = [k for k, on in (("surface", self.surface is not None), ("via", bool(self.via)), ("bow", self.bow > 0)) if on]
+        if clash:
+            raise ValueError(f"muscle {self.name!r}: outlines place its belly; drop {', '.join(clash)}")
+        heights = [o.z for o in self.outlines]
+        if len(set(heights)) != len(heights):
+            raise ValueError(f"muscle {self.name!r}: two outlines at the same height z")
+        thin = [o.z for o in self.outlines if o.semi_axes[1] <= max(self.tendon_radius)]
+        if thin:
+            raise ValueError(f"muscle {self.name!r}: the outline at z = {thin[0]:g} mm is thinner than its tendons "
+                             f"(smaller semi-axis at most {max(self.tendon_radius):g} mm)")
         return self
 
     @model_validator(mode="after")

@@ -17,7 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from persival.model.anatomy_check import Body, signed_distance
-from persival.model.arm_body import ArmKinematics, muscle_profile
+from persival.model.arm_body import ArmKinematics
+from persival.model.arm_file import ModelFileError
 from persival.model.bone_shapes import ElbowFrame, bone_shapes
 
 __all__ = ["LEVELS", "OutlineOverlapError", "check_outlines", "outline_overlaps", "outlines_at"]
@@ -26,34 +27,51 @@ LEVELS = (0.1, 0.3, 0.5, 0.7, 0.9)
 VERTICES = 72
 
 
-class OutlineOverlapError(ValueError):
+class OutlineOverlapError(ModelFileError):
     """A model whose muscles' outlines overlap each other or a bone at some level."""
 
 
 def outlines_at(kinematics: ArmKinematics, z: float) -> dict[str, list[np.ndarray]]:
     """Per muscle, its outlines (each (VERTICES, 3), elbow frame) where its solid crosses the plane
-    at height z of the elbow frame: one per crossing of its centre line."""
+    at height z of the elbow frame: one per crossing of its centre line. The section there (a
+    circle, or an outlined muscle's ellipse: persival.model.muscle_sweep) is carried along the
+    centre line's tangent into the plane: the oblique cut of the local cylinder, at most three
+    semi-axes long."""
     frame = ElbowFrame.of(kinematics.spec)
     phi = np.linspace(0.0, 2.0 * np.pi, VERTICES, endpoint=False)
     out = {}
     for muscle in kinematics.spec.ordered_muscles():
-        line = frame.local(kinematics.centre_line(muscle))
-        radius, _ = muscle_profile(muscle, np.linspace(0.0, 1.0, len(line)), kinematics.centre_line_length(muscle))
+        sweep = kinematics.sweep(muscle)
+        line = frame.local(sweep.line)
         rings = []
         for i in np.flatnonzero((line[:-1, 2] - z) * (line[1:, 2] - z) <= 0.0):
             a, b = line[i], line[i + 1]
             if a[2] == b[2]:
                 continue
             t = (z - a[2]) / (b[2] - a[2])
-            centre, r = a + t * (b - a), radius[i] + t * (radius[i + 1] - radius[i])
+            centre = a + t * (b - a)
+            semi = sweep.semi_axes[i] + t * (sweep.semi_axes[i + 1] - sweep.semi_axes[i])
             tangent = (b - a) / np.linalg.norm(b - a)
-            across = np.hypot(tangent[0], tangent[1])
-            u = np.array([tangent[0], tangent[1], 0.0]) / across if across > 1e-9 else np.array([1.0, 0.0, 0.0])
-            v = np.cross([0.0, 0.0, 1.0], u)
-            stretch = min(1.0 / max(abs(tangent[2]), 1e-9), 3.0)  # the oblique cut, at most 3 radii long
-            rings.append(centre + r * (stretch * np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v))
+            major = _across(tangent, None if sweep.circular else sweep.major[i] @ frame.axes.T)
+            minor = np.cross(tangent, major)
+            ring = centre + semi[0] * np.cos(phi)[:, None] * major + semi[1] * np.sin(phi)[:, None] * minor
+            rise = np.copysign(max(abs(tangent[2]), 1.0 / 3.0), tangent[2])
+            ring = ring + ((z - ring[:, 2]) / rise)[:, None] * tangent
+            ring[:, 2] = z
+            rings.append(ring)
         out[muscle.name] = rings
     return out
+
+
+def _across(tangent: np.ndarray, major: np.ndarray | None) -> np.ndarray:
+    """A unit vector across the tangent: the ellipse's larger semi-axis, or for a circle the
+    horizontal one (any will do)."""
+    if major is None:
+        major = np.cross([0.0, 0.0, 1.0], tangent)
+        if np.linalg.norm(major) < 1e-9:
+            major = np.array([1.0, 0.0, 0.0])
+    major = major - (major @ tangent) * tangent
+    return major / np.linalg.norm(major)
 
 
 def _inside_polygon(points: np.ndarray, ring: np.ndarray) -> np.ndarray:

@@ -76,9 +76,12 @@ def swept_solid_mesh(
     radii: np.ndarray,
     mesh_size: float,
     *,
+    major_axes: np.ndarray | None = None,
     verbose: bool = False,
 ) -> Tet10Mesh:
-    """Loft circles of ``radii`` (k,) placed perpendicular to ``centre_line`` (k, 3) into a tet10 mesh.
+    """Loft circles of ``radii`` (k,) placed perpendicular to ``centre_line`` (k, 3) into a tet10 mesh;
+    or ellipses: ``radii`` (k, 2) their semi-axes, the larger first, along ``major_axes`` (k, 3),
+    unit vectors perpendicular to the centre line.
 
     Node sets ``origin`` and ``insertion``: the nodes of the first and last end cap.
     Cell data ``fibre`` (unit tangent of the centre line nearest the cell centroid) and
@@ -90,8 +93,11 @@ def swept_solid_mesh(
     radii = np.asarray(radii, dtype=float)
     if centre_line.ndim != 2 or centre_line.shape[1] != 3 or len(centre_line) < 2:
         raise MeshError("centre_line must be (k >= 2, 3)")
-    if radii.shape != (len(centre_line),):
-        raise MeshError("one radius per centre-line station is required")
+    elliptic = major_axes is not None
+    if radii.shape != ((len(centre_line), 2) if elliptic else (len(centre_line),)):
+        raise MeshError("one radius (two semi-axes for ellipses) per centre-line station is required")
+    if elliptic and np.any(radii[:, 0] < radii[:, 1]):
+        raise MeshError("an ellipse's larger semi-axis comes first")
     if np.any(radii <= 0) or not np.all(np.isfinite(radii)):
         raise MeshError("radii must be positive and finite")
     if mesh_size <= 0:
@@ -109,9 +115,13 @@ def swept_solid_mesh(
     gmsh.model.add("swept_solid")
     try:
         wires = []
-        for centre, tangent, radius in zip(centre_line, tangents, radii):
-            circle = gmsh.model.occ.addCircle(*centre, radius, zAxis=list(tangent), xAxis=list(_perpendicular_frame(tangent)))
-            wires.append(gmsh.model.occ.addCurveLoop([circle]))
+        for k, (centre, tangent) in enumerate(zip(centre_line, tangents)):
+            if elliptic:  # the seam on the larger semi-axis at every station: the loft does not twist
+                section = gmsh.model.occ.addEllipse(*centre, *radii[k], zAxis=list(tangent), xAxis=list(major_axes[k]))
+            else:
+                section = gmsh.model.occ.addCircle(*centre, radii[k], zAxis=list(tangent),
+                                                   xAxis=list(_perpendicular_frame(tangent)))
+            wires.append(gmsh.model.occ.addCurveLoop([section]))
         out = gmsh.model.occ.addThruSections(wires, makeSolid=True, makeRuled=False)
         gmsh.model.occ.synchronize()
         volumes = [tag for dim, tag in out if dim == 3]
@@ -128,8 +138,13 @@ def swept_solid_mesh(
             raise MeshError("could not identify the two end caps of the swept solid")
         gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
         gmsh.option.setNumber("Mesh.MeshSizeMin", 0.2 * mesh_size)
-        # thin tendons need elements of about their radius: size from the circles' curvature
-        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 6)
+        if elliptic:
+            # elements of about the section's smaller semi-axis (the circles' rule below, without
+            # the tiny elements the curvature at a flat ellipse's ends would ask for)
+            _size_from_sections(centre_line, radii[:, 1], mesh_size)
+        else:
+            # thin tendons need elements of about their radius: size from the circles' curvature
+            gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 6)
         gmsh.option.setNumber("Mesh.Algorithm3D", 1)  # Delaunay: robust for smooth lofts
         gmsh.option.setNumber("Mesh.Optimize", 1)
         gmsh.option.setNumber("Mesh.ElementOrder", 2)
@@ -149,6 +164,19 @@ def swept_solid_mesh(
     mesh.straighten_invalid_elements()
     mesh.check()
     return mesh
+
+
+def _size_from_sections(centre_line: np.ndarray, semi_minor: np.ndarray, mesh_size: float) -> None:
+    """gmsh's element size at a point: 1.05 times the smaller semi-axis of the nearest station
+    (6 elements round a circle, as MeshSizeFromCurvature = 6 gives), at most ``mesh_size``."""
+    import gmsh
+
+    size = np.minimum(1.05 * semi_minor, mesh_size)
+
+    def at(dim, tag, x, y, z, lc):
+        return float(size[np.argmin(np.sum((centre_line - (x, y, z)) ** 2, axis=1))])
+
+    gmsh.model.mesh.setSizeCallback(at)
 
 
 def _project_on_polyline(x: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -20,7 +20,6 @@ import numpy as np
 
 from persival.model.arm_body import ArmBody, muscle_profile
 from persival.model.arm_file import Muscle
-from persival.model.geometry import swept_solid_mesh
 from persival.model.mesh import Tet10Mesh
 from persival.model.surface_muscle import surface_muscle
 
@@ -76,8 +75,7 @@ def _mesh_one(body: ArmBody, muscle: Muscle, out: Path) -> dict:
     else:
         line = body.centre_line(muscle)
         length = body.centre_line_length(muscle)
-        radius, _ = muscle_profile(muscle, np.linspace(0.0, 1.0, len(line)), length)
-        mesh = swept_solid_mesh(line, radius, size)
+        mesh = body.sweep(muscle).mesh(size)
         phi_nodes = None
         entry.update(surface=None, area_mm2=_boundary_area(mesh))
     seconds = time.perf_counter() - t0
