@@ -28,6 +28,7 @@ from persival.model.muscle_state import MusclePath, MuscleState
 from persival.model.muscle_unit import MuscleUnit
 from persival.model.progress import SolveTracker
 from persival.model.solver import ConvergenceError, SolverOptions
+from persival.model.walls import septum_sides, wall_obstacles
 from persival.vocabulary import check_activation_vector
 
 __all__ = ["ArmModel", "ArmState", "muscle_profile", "rotation_about"]
@@ -67,17 +68,22 @@ class ArmModel(ArmStateCache, ArmBody):
             insertion=lambda theta, m=muscle: self.body_end(m, theta),
             geometry=lambda theta, m=muscle: self.muscle_length(m, theta),
             mesh_angle_deg=muscle.mesh_angle_deg,
-            bones=self._bones_of(muscle) if muscle.wraps else None,
+            bones=self._bones_of(muscle, mesh.points) if muscle.wraps else None,
             penalty=self.spec.contact.penalty,
             insertion_tie=muscle.insertion_tie,
             hinge=(self.centre, self.axis),
         )
         return MuscleUnit(muscle.name, mesh, material, path, self.options)
 
-    def _bones_of(self, muscle: Muscle):
-        """theta -> the capsules of the bones ``muscle`` wraps over, world frame (docs/theory.md, 3.5)."""
-        bones = [self.spec.bone(name) for name in muscle.wraps]
-        return lambda theta: bone_obstacles(bones, self.centre, self.axis, theta)
+    def _bones_of(self, muscle: Muscle, mesh_points: np.ndarray):
+        """theta -> the capsules of the bones and the walls ``muscle`` wraps over, world frame
+        (docs/theory.md, 3.5); a septum keeps the muscle on the side it is meshed on."""
+        bone_names = {b.name for b in self.spec.bones}
+        bones = [self.spec.bone(name) for name in muscle.wraps if name in bone_names]
+        walls = [self.spec.wall(name) for name in muscle.wraps if name not in bone_names]
+        sides = septum_sides(walls, self.centre, self.axis, muscle.mesh_angle_deg, mesh_points)
+        return lambda theta: (bone_obstacles(bones, self.centre, self.axis, theta)
+                              + wall_obstacles(walls, self.centre, self.axis, theta, sides))
 
     def set_options(self, options: SolverOptions) -> None:
         """Solver options of every solve of this model (retries use smaller load steps)."""

@@ -120,6 +120,33 @@ class Bone(_Strict):
         return {"humerus": HumerusShape, "ulna": UlnaShape, "radius": RadiusShape}.get(self.name, TubeShape)()
 
 
+class Wall(_Strict):
+    """A fascial wall (persival.model.walls) that moves with its segment: a septum (a plane a
+    muscle keeps to its side of, over a band of heights) or a sleeve (the inside of a capsule)."""
+
+    name: str
+    kind: Literal["septum", "sleeve"]
+    segment: Literal["upper_arm", "forearm"] = "upper_arm"
+    point: Vector | None = Field(None, description="septum: a point of the plane (mm)")
+    normal: Vector | None = Field(None, description="septum: the plane's normal")
+    along: Vector = Field((0.0, 0.0, 1.0), description="septum: the direction its band of heights is measured along")
+    band: tuple[float, float] | None = Field(None, description="septum: heights (mm from point, along) where it acts")
+    ramp: float = Field(10.0, gt=0, description="septum: mm over which it fades in and out at the band's ends")
+    start: Vector | None = Field(None, description="sleeve: one end of its axis")
+    end: Vector | None = Field(None, description="sleeve: the other end")
+    radius: float | None = Field(None, gt=0, description="sleeve: mm from its axis")
+
+    @model_validator(mode="after")
+    def _complete(self):
+        need = {"septum": ("point", "normal", "band"), "sleeve": ("start", "end", "radius")}[self.kind]
+        missing = [k for k in need if getattr(self, k) is None]
+        if missing:
+            raise ValueError(f"wall {self.name!r}: a {self.kind} needs {', '.join(missing)}")
+        if self.kind == "septum" and self.band[1] - self.band[0] < 2 * self.ramp:
+            raise ValueError(f"wall {self.name!r}: its band must be at least two ramps ({2 * self.ramp:g} mm) long")
+        return self
+
+
 class Contact(_Strict):
     penalty: float = Field(1.0, gt=0, description="N/mm^3: contact pressure per mm of penetration (docs/theory.md, 3.5)")
 
@@ -145,7 +172,8 @@ class Muscle(_Strict):
     action: Literal["flexor", "extensor"]
     origin: Vector
     insertion: Vector
-    wraps: list[str] = Field(default_factory=list, description="bones the muscle slides over (frictionless contact)")
+    wraps: list[str] = Field(default_factory=list, description="bones and walls the muscle slides over (frictionless "
+                                                               "contact)")
     via: list[Vector] = Field(default_factory=list, description="centre-line points, upper-arm frame")
     wrap_radius: float = Field(0.0, ge=0, description="mm: the path wraps a cylinder of this radius on the hinge axis "
                                                       "(0: a straight path; persival.model.wrapping)")
@@ -244,6 +272,7 @@ class ArmModelFile(_Strict):
     forearm: Forearm = Forearm()
     contact: Contact = Contact()
     bones: list[Bone]
+    walls: list[Wall] = Field(default_factory=list)
     muscles: list[Muscle]
     profiles: dict[str, Profile]
 
@@ -283,11 +312,14 @@ class ArmModelFile(_Strict):
                 if d <= m.wrap_radius:
                     raise ValueError(f"muscle {m.name!r}: its {end} lies {d:.1f} mm from the hinge axis, inside its "
                                      f"wrap cylinder (wrap_radius {m.wrap_radius} mm)")
-        bone_names = [b.name for b in self.bones]
+        bone_names = [b.name for b in self.bones] + [w.name for w in self.walls]
+        if len(set(bone_names)) != len(bone_names):
+            raise ValueError(f"bones and walls need distinct names, got {bone_names}")
         for m in self.muscles:
             unknown = [b for b in m.wraps if b not in bone_names]
             if unknown:
-                raise ValueError(f"muscle {m.name!r} wraps over unknown bone(s) {unknown}; the bones are {bone_names}")
+                raise ValueError(f"muscle {m.name!r} wraps over unknown bone(s) or wall(s) {unknown}; the bones and "
+                                 f"walls are {bone_names}")
         if not self.profiles:
             raise ValueError("at least one mesh profile is required")
         return self
@@ -296,6 +328,12 @@ class ArmModelFile(_Strict):
         for b in self.bones:
             if b.name == name:
                 return b
+        raise KeyError(name)
+
+    def wall(self, name: str) -> Wall:
+        for w in self.walls:
+            if w.name == name:
+                return w
         raise KeyError(name)
 
     def muscle(self, name: str) -> Muscle:

@@ -1,0 +1,63 @@
+"""Fascial walls (persival.model.walls): a septum's window and a sleeve give the exact contact
+force and tangent (central differences of the energy and of the force), a septum acts only in its
+band and keeps each muscle to the side it is meshed on, and a model file's walls reach the
+muscles that name them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from persival.model.contact import ObstacleContact
+from persival.model.geometry import box_mesh
+from persival.model.walls import Septum, Sleeve, septum_sides, wall_obstacles
+
+
+def _differences(contact, x0):
+    f, K = contact.force_and_tangent(x0)
+    K = K.toarray()
+    h, x = 1e-6, x0.ravel()
+    K_fd, f_fd = np.zeros_like(K), np.zeros_like(f)
+    for j in range(x.size):
+        e = np.zeros(x.size)
+        e[j] = h
+        K_fd[:, j] = (contact.force_and_tangent(x + e)[0] - contact.force_and_tangent(x - e)[0]) / (2 * h)
+        f_fd[j] = (contact.energy(x + e) - contact.energy(x - e)) / (2 * h)
+    return np.abs(K - K.T).max() / np.abs(K).max(), np.abs(K_fd - K).max() / np.abs(K).max(), \
+        np.abs(f_fd - f).max() / np.abs(f).max()
+
+
+def test_septum_and_sleeve_tangents_match_finite_differences():
+    """A block's nodes across a septum's ramp (the window's slope and curvature count) and
+    outside a sleeve (shaft and the end beyond it)."""
+    mesh = box_mesh((2, 2, 2), (10.0, 10.0, 10.0))
+    x0 = mesh.points + 0.3 * np.random.default_rng(1).standard_normal(mesh.points.shape)
+    septum = Septum([0.0, 4.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], (3.0, 40.0), 6.0, "septum")
+    sleeve = Sleeve([5.0, 5.0, -20.0], [5.0, 5.0, 8.0], 6.5, "sleeve")
+    contact = ObstacleContact.at_nodes(mesh, [septum, sleeve], 3.0)
+    g_septum, g_sleeve = septum.project(x0)[0], sleeve.project(x0)[0]
+    z = x0[:, 2]
+    assert np.any((g_septum > 0) & (z > 3.0) & (z < 9.0)) and np.any((g_septum > 0) & (z > 9.0))  # ramp and full
+    assert np.any(g_sleeve > 0) and np.any((g_sleeve > 0) & (z > 8.0))  # shaft and beyond the end
+    asymmetry, tangent, force = _differences(contact, x0)
+    assert asymmetry < 1e-12 and tangent < 1e-7 and force < 1e-7
+
+
+def test_septum_acts_only_in_its_band_and_keeps_each_side():
+    septum = Septum([0.0, 30.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], (40.0, 160.0), 20.0, "septum")
+    x = np.array([[0.0, 25.0, 20.0], [0.0, 25.0, 50.0], [0.0, 25.0, 100.0], [0.0, 25.0, 170.0], [0.0, 35.0, 100.0]])
+    g = septum.project(x)[0]
+    assert g[0] == 0.0 and g[3] == 0.0  # below and above the band
+    assert 0.0 < g[1] < 5.0 and g[2] == pytest.approx(5.0) and g[4] < 0.0  # ramping in, fully on, free side
+
+    class Wall:  # a model-file entry (persival.model.arm_file.Wall)
+        name, kind, segment = "septum", "septum", "upper_arm"
+        point, normal, along, band, ramp = (0.0, 30.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (40.0, 160.0), 20.0
+
+    deep = np.array([[0.0, 20.0, 100.0], [3.0, 22.0, 120.0]])
+    superficial = deep + [0.0, 25.0, 0.0]
+    origin, axis = np.zeros(3), np.array([1.0, 0.0, 0.0])
+    assert septum_sides([Wall], origin, axis, 60.0, deep) == {"septum": -1.0}
+    assert septum_sides([Wall], origin, axis, 60.0, superficial) == {"septum": 1.0}
+    kept_deep = wall_obstacles([Wall], origin, axis, 60.0, {"septum": -1.0})[0]
+    assert kept_deep.project(deep)[0].max() <= 0.0 and kept_deep.project(superficial)[0].min() > 0.0
