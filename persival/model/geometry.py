@@ -114,15 +114,7 @@ def swept_solid_mesh(
     gmsh.option.setNumber("General.Verbosity", 5 if verbose else 0)
     gmsh.model.add("swept_solid")
     try:
-        wires = []
-        for k, (centre, tangent) in enumerate(zip(centre_line, tangents)):
-            if elliptic:  # the seam on the larger semi-axis at every station: the loft does not twist
-                section = gmsh.model.occ.addEllipse(*centre, *radii[k], zAxis=list(tangent), xAxis=list(major_axes[k]))
-            else:
-                section = gmsh.model.occ.addCircle(*centre, radii[k], zAxis=list(tangent),
-                                                   xAxis=list(_perpendicular_frame(tangent)))
-            wires.append(gmsh.model.occ.addCurveLoop([section]))
-        out = gmsh.model.occ.addThruSections(wires, makeSolid=True, makeRuled=False)
+        out = _loft(centre_line, tangents, radii, major_axes)
         gmsh.model.occ.synchronize()
         volumes = [tag for dim, tag in out if dim == 3]
         if len(volumes) != 1:
@@ -164,6 +156,22 @@ def swept_solid_mesh(
     mesh.straighten_invalid_elements()
     mesh.check()
     return mesh
+
+
+def _loft(centre_line, tangents, radii, major_axes):
+    """gmsh OCC: a circle (or an ellipse along ``major_axes``) across the centre line at every
+    station, lofted into one solid; returns addThruSections' entities."""
+    import gmsh
+
+    wires = []
+    for k, (centre, tangent) in enumerate(zip(centre_line, tangents)):
+        if major_axes is not None:  # the seam on the larger semi-axis at every station: the loft does not twist
+            section = gmsh.model.occ.addEllipse(*centre, *radii[k], zAxis=list(tangent), xAxis=list(major_axes[k]))
+        else:
+            section = gmsh.model.occ.addCircle(*centre, radii[k], zAxis=list(tangent),
+                                               xAxis=list(_perpendicular_frame(tangent)))
+        wires.append(gmsh.model.occ.addCurveLoop([section]))
+    return gmsh.model.occ.addThruSections(wires, makeSolid=True, makeRuled=False)
 
 
 def _size_from_sections(centre_line: np.ndarray, semi_minor: np.ndarray, mesh_size: float) -> None:

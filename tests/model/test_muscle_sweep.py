@@ -93,3 +93,16 @@ def test_bad_outlines_are_refused(tmp_path, old, new, message):
     with pytest.raises((ModelFileError, ValueError), match=message):
         load_model_file(path)
         ArmKinematics(path)
+
+
+def test_the_built_in_mesh_is_still_the_fixture_tables_mesh():
+    """Meshed afresh (not from the cache), the built-in coarse arm has the fingerprint the response-
+    table fixture was built on: a sweep change that moves one node would make the table tests skip."""
+    import json
+    from pathlib import Path
+
+    from persival.model.arm_body import ArmBody
+    from persival.tables.response_table import mesh_fingerprint
+
+    header = json.loads((Path(__file__).parents[1] / "data" / "response_table_coarse" / "header.json").read_text())
+    assert mesh_fingerprint(ArmBody.frame(None, "coarse")._build_mesh()) == header["mesh_fingerprint"]
