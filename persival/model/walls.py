@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from persival.model.contact import _as_vector
+from persival.model.contact import Capsule, _as_vector
 from persival.model.rotations import rotation_about
 
 __all__ = ["Septum", "Sleeve", "wall_obstacles"]
@@ -90,46 +90,27 @@ class Septum:
 
 @dataclass(frozen=True)
 class Sleeve:
-    """The inside of the capsule start-end-radius: the body keeps within ``radius`` of the segment."""
+    """The inside of ``capsule``: the body keeps within its radius of its axis segment. The
+    capsule's penetration, normal and normal gradient with their signs turned."""
 
-    start: np.ndarray
-    end: np.ndarray
-    radius: float
-    name: str = "sleeve"
+    capsule: Capsule
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "start", _as_vector(self.start))
-        object.__setattr__(self, "end", _as_vector(self.end))
-        if not self.radius > 0:
-            raise ValueError(f"wall {self.name!r}: radius must be positive")
+    @property
+    def name(self) -> str:
+        return self.capsule.name
 
     def project(self, x: np.ndarray):
-        axis = self.end - self.start
-        length = float(np.linalg.norm(axis))
-        t = axis / length
-        s = (x - self.start) @ t
-        inside = (s > 0.0) & (s < length)
-        v = x - (self.start + np.clip(s, 0.0, length)[:, None] * t)
-        d = np.linalg.norm(v, axis=1)
-        d_safe = np.where(d > 0.0, d, np.inf)
-        n = -v / d_safe[:, None]
-
-        def dn_dx(mask: np.ndarray) -> np.ndarray:
-            nm = n[mask]
-            P = np.eye(3) - nm[:, :, None] * nm[:, None, :] - inside[mask][:, None, None] * np.outer(t, t)[None]
-            return -P / d_safe[mask][:, None, None]
-
-        return d - self.radius, n, dn_dx
+        g, n, dn_dx = self.capsule.project(x)
+        return -g, -n, lambda mask: -dn_dx(mask)
 
     def transformed(self, rotation: np.ndarray, centre) -> Sleeve:
-        c, R = _as_vector(centre), np.asarray(rotation, dtype=float)
-        return Sleeve(c + R @ (self.start - c), c + R @ (self.end - c), self.radius, self.name)
+        return Sleeve(self.capsule.transformed(rotation, centre))
 
 
 def wall_of(spec_wall):
     """The obstacle of a model-file wall entry (persival.model.arm_file.Wall), at theta = 0."""
     if spec_wall.kind == "sleeve":
-        return Sleeve(spec_wall.start, spec_wall.end, spec_wall.radius, spec_wall.name)
+        return Sleeve(Capsule(spec_wall.start, spec_wall.end, spec_wall.radius, spec_wall.name))
     return Septum(spec_wall.point, spec_wall.normal, spec_wall.along, tuple(spec_wall.band), spec_wall.ramp,
                   spec_wall.name)
 
