@@ -95,6 +95,7 @@ def test_bad_outlines_are_refused(tmp_path, old, new, message):
         ArmKinematics(path)
 
 
+@pytest.mark.slow  # meshes the coarse arm (8 s): make test keeps it, the quick loop need not
 def test_the_built_in_mesh_is_still_the_fixture_tables_mesh():
     """Meshed afresh (not from the cache), the built-in coarse arm has the fingerprint the response-
     table fixture was built on: a sweep change that moves one node would make the table tests skip."""
