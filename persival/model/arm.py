@@ -233,7 +233,9 @@ class ArmModel(ArmStateCache, ArmBody):
         equivalent of the bordered system). Its derivative is the Schur complement of every
         muscle (exact, so the iteration converges quadratically); a bracket of the root and a
         largest step keep it from jumping past a stiff joint limit, and a trial angle whose
-        muscles fail to converge is pulled back halfway.
+        muscles fail to converge is pulled back halfway. A bracket narrower than
+        ``joint_bracket_deg`` ends it too, where the muscles' noise floor keeps |g| just above
+        the tolerance.
         """
         opts = self.options
         stats: dict = {"joint_iterations": 0, "iterations": 0}
@@ -243,7 +245,8 @@ class ArmModel(ArmStateCache, ArmBody):
         lo, hi = -np.inf, np.inf  # bracket: g(lo) < 0 < g(hi) (g grows with theta when stable)
         lower, upper = self.spec.joint.limits_deg
         for _ in range(60):
-            if abs(g) <= self.moment_tolerance(states):
+            tolerance = self.moment_tolerance(states)
+            if abs(g) <= tolerance or (hi - lo <= opts.joint_bracket_deg and abs(g) <= opts.joint_noise_factor * tolerance):
                 break
             if g > 0:
                 hi = min(hi, theta)

@@ -43,6 +43,12 @@ class SolverOptions:
     moment_rtol: float = 1e-7
     max_angle_step: float = 5.0  # deg, largest hinge-angle change of one Newton iteration
     joint_max_step: float = 15.0  # deg, largest angle change of one staggered joint iteration (ArmModel)
+    # ... and the root is taken as found once its bracket is this narrow (deg) while the residual
+    # is within joint_noise_factor of the tolerance: muscles in frictionless contact with a wall
+    # reach their own tolerance with a noise floor of up to 0.03 N mm in the hanging arm, so g
+    # changes sign across 1e-6 deg without dropping below 2e-4 N mm
+    joint_bracket_deg: float = 1e-4
+    joint_noise_factor: float = 1e3
     backend: str = "auto"
     # Newton directions from the last factorization this solver made (of a nearby tangent: an
     # earlier iteration, or the previous solve of the same body), refined against the current
