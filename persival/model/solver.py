@@ -45,8 +45,8 @@ class SolverOptions:
     joint_max_step: float = 15.0  # deg, largest angle change of one staggered joint iteration (ArmModel)
     # ... and the root is taken as found once its bracket is this narrow (deg) while the residual
     # is within joint_noise_factor of the tolerance: muscles in frictionless contact with a wall
-    # reach their own tolerance with a noise floor of up to 0.03 N mm in the hanging arm, so g
-    # changes sign across 1e-6 deg without dropping below 2e-4 N mm
+    # carry a moment noise of a few hundredths of a N mm (0.03 N mm measured in a hanging arm),
+    # which can keep |g| above a 2e-4 N mm tolerance at a root already bracketed
     joint_bracket_deg: float = 1e-4
     joint_noise_factor: float = 1e3
     backend: str = "auto"
