@@ -61,8 +61,10 @@ def fit_structured_command(
     profile: str = typer.Option("quick", "--profile", help="Mesh profile of the arm (its response tables)."),
     model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
     tables: Path | None = typer.Option(None, "--tables", help="Response-table folder (default: the model's cache)."),
-    tolerance: float = typer.Option(0.05, "--tolerance", min=1e-6, help="POD truncation, mm: every tabulated "
-                                    "surface kept within it."),
+    tolerance: float | None = typer.Option(None, "--tolerance", min=1e-6, help="POD truncation, mm: every tabulated "
+                                           "surface kept within it [default: 0.2]."),
+    frame: str = typer.Option("world", "--frame", help="Reduce each muscle's surfaces in the world frame (one product "
+                              "per muscle in the exported graph) or in its own frame ('own': fewer modes, turned by Q)."),
 ) -> None:
     """Fit the structured surrogate (per-muscle shape and moment models + the elbow's equilibrium) to the response tables."""
     from rich.console import Console
@@ -71,9 +73,11 @@ def fit_structured_command(
     from persival.surrogate.stage import fit_structured
 
     console = Console()
+    if frame not in ("world", "own"):
+        fail(f"--frame must be 'world' or 'own', not {frame!r}")
     with user_errors(StoreError, out=out):
         check_output_dir(out)
-        surrogate = fit_structured(store, out, profile, model, tables, tolerance)
+        surrogate = fit_structured(store, out, profile, model, tables, tolerance, frame)
     meta = surrogate.metadata
     console.print(f"fitted {len(meta['muscles'])} muscles from the tables in {meta['fit_seconds']:.1f} s: POD modes "
                   + ", ".join(f"{k} {v}" for k, v in meta["modes"].items())

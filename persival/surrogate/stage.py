@@ -38,13 +38,15 @@ def fit_sparse_grid(store: str | Path, out: str | Path, muscles=None, degree: in
 
 
 def fit_structured(store: str | Path, out: str | Path, profile: str = "quick", model_file=None, tables=None,
-                   tolerance_mm: float = 0.05, progress=None):
+                   tolerance_mm: float | None = None, frame: str = "world", progress=None):
     """The structured surrogate of the FE arm, fitted to its response tables, answering the
-    surfaces of ``store`` (a campaign of the same arm: only its surfaces and model are read)."""
-    from persival.surrogate.structured.surrogate import StructuredSurrogate
+    surfaces of ``store`` (a campaign of the same arm: only its surfaces and model are read);
+    ``tolerance_mm``: the POD truncation (default ``DEFAULT_TOLERANCE_MM``)."""
+    from persival.surrogate.structured.surrogate import DEFAULT_TOLERANCE_MM, StructuredSurrogate
 
     data = Dataset.from_store(store)
-    surrogate = StructuredSurrogate(profile, model_file, tables, tolerance_mm).fit(data, progress)
+    tolerance = DEFAULT_TOLERANCE_MM if tolerance_mm is None else tolerance_mm
+    surrogate = StructuredSurrogate(profile, model_file, tables, tolerance, frame=frame).fit(data, progress)
     surrogate.save(out)
     return surrogate
 

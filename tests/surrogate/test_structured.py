@@ -67,6 +67,34 @@ def test_table_states_are_reproduced_within_the_pod_tolerance(arm, table, fitted
         assert error <= fitted.tolerance_mm + 1e-6, (theta, level, error)
 
 
+def test_both_frames_reproduce_the_tables_and_their_graphs_answer_as_numpy(arm, table, fitted, surfaces):
+    """The default reduces the world positions (no turn in the graph); the own frame reduces the
+    muscle's frame and turns it by Q(theta). Both reproduce a tabulated FE state within the POD
+    tolerance, and both graphs (float64) give the numpy reference's surfaces and angles."""
+    from persival.surrogate.dataset import Dataset
+    from persival.surrogate.structured.surrogate import StructuredSurrogate
+
+    empty = Dataset(np.zeros((0, 5)), np.zeros((0, surfaces.n_nodes, 3)), np.zeros(0), surfaces,
+                    {"model_hash": arm.model_hash, "label": "FE arm (coarse)"})
+    own = StructuredSurrogate("coarse", tables=str(FIXTURE), frame="own").fit(empty)
+    alpha = np.random.default_rng(5).uniform(0.0, 1.0, (12, 5))
+    for model, turned in ((fitted, False), (own, True)):
+        graph = model.deployable(torch.float64)
+        assert graph.turned == [turned] * 5
+        with torch.no_grad():
+            positions, angles = graph(torch.as_tensor(alpha), torch.zeros(12, 1, dtype=torch.float64))
+        expected, expected_angles = model.predict_with_angle(alpha)
+        assert np.abs(positions.numpy() - expected).max() < 1e-9 and np.abs(angles.numpy()[:, 0] - expected_angles).max() < 1e-9
+    k, j = 4, 1
+    theta, level = table.angles_deg[k], table.levels[j]
+    truth = fitted.surfaces_at([theta], np.full((1, 5), level))
+    assert np.linalg.norm(own.surfaces_at([theta], np.full((1, 5), level)) - truth, axis=2).max() <= 2 * own.tolerance_mm
+    # the own frame needs fewer modes for the same tolerance: the turn carries the line of action
+    assert sum(own.metadata["modes"].values()) < sum(fitted.metadata["modes"].values())
+    with pytest.raises(ValueError, match="frame"):
+        StructuredSurrogate("coarse", frame="muscle")
+
+
 def test_moments_are_the_tables_at_their_grid_and_the_fe_root_nearby(fitted, table):
     moments = table.moment_table()
     for m, name in enumerate(MUSCLES):

@@ -3,12 +3,13 @@
 ``activations`` (b, 5) and ``load_kg`` (b, 1) -> ``positions`` (b, N, 3) mm and
 ``elbow_angle_deg`` (b, 1). The same arithmetic as the numpy reference
 (:class:`~persival.surrogate.structured.moment_model.MomentModel`, :class:`MuscleShape`), written
-with dense products, comparisons and one-hot selections only (no gathers, no loops that depend on
-the data), and with few operators, since at batch 1 each costs about a microsecond: a sign scan
-brackets the stable root nearest the hanging arm, the bracket's table interval gives the
-balance as one cubic, and regula falsi plus a fixed number of Newton steps on that cubic
-converge it; every muscle's surface is then read at that angle (docs/theory.md
-7.7).
+with dense products, comparisons and gathers (no loops that depend on the data), and with few
+operators and little memory traffic, since at batch 1 each operator costs a fraction of a
+microsecond and every byte of a product's matrix is read once per state: a sign scan brackets the
+stable root nearest the hanging arm, the bracket's table interval gives the balance as one cubic,
+and regula falsi plus a fixed number of Newton steps on that cubic converge it; then only the four
+Hermite data of that interval (values and slopes at its two angles) are gathered to read every
+muscle's surface at that angle (docs/theory.md 7.7).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 import torch
 
 from persival.surrogate.structured.cardinal import torch_weights
-from persival.surrogate.structured.moment_model import NEWTON_STEPS
+from persival.surrogate.structured.moment_model import NEWTON_SLOPE_CAP, NEWTON_STEPS
 
 __all__ = ["StructuredGraph"]
 
@@ -31,108 +32,130 @@ class StructuredGraph(torch.nn.Module):
         in ``dtype``: in float16 they would move by 0.1 mm). The runtime casts them back once,
         when it loads the graph (constant folding)."""
         super().__init__()
-        as_t = lambda a: torch.as_tensor(np.asarray(a), dtype=dtype)  # noqa: E731
-        basis = moments.theta_basis
-        n_t2, n_a = moments.data.shape[1], len(moments.levels)
-        n_int = len(basis.breaks) - 1
-        self.n_levels, self.n_t2 = n_a, n_t2
-        self.activation_tables = moments.activation_basis.torch_tables(dtype)
-        self.moment_rows = as_t(np.transpose(moments.data, (0, 2, 1)).reshape(5 * n_a, n_t2))
-        self.external_row, self.load_row = as_t(moments.external_data[None]), as_t(moments.load_data[None])
-        # the sign scan
-        grid = moments.scan_deg
-        self.scan_weights = as_t(moments.scan_weights.T)  # (2 n_t, n_g)
-        self.scan_lo, self.scan_hi = as_t(grid[:-1, None]), as_t(grid[1:, None])
-        self.scan_distance = as_t(np.abs(grid[:-1] - moments.near_deg))
-        self.scan_index = as_t(np.arange(len(grid) - 1))
-        self.scan_interval = as_t(np.eye(n_int)[moments.scan_interval])  # (n_g - 1, n_int) one-hot
-        # per table interval: its start and the power-form rows (t^3, t^2, t, 1) of the theta weights
-        self.interval_start = as_t(basis.breaks[:-1, None])
-        self.interval_rows = as_t(np.transpose(basis.coefficients, (1, 0, 2)).reshape(n_int, 4 * n_t2))
-        self.weight_rows = as_t(basis.coefficients.reshape(4 * n_int, n_t2))  # power-major, as torch_weights
-        # shapes: every muscle's coefficient data side by side, (2 n_t, n_a * R), each followed by a
-        # constant coefficient 1 (value 1, slope 0: the weights reproduce constants) that carries the
-        # muscle's mean surface and the homogeneous coordinate of its affine turn (below)
-        one = np.zeros((n_t2, n_a, 1))
-        one[: n_t2 // 2] = 1.0
-        data = np.concatenate([np.concatenate([s.coefficient_data, one], axis=2) for s in shapes], axis=2)
-        self.coefficient_rows = as_t(data.reshape(n_t2, -1))
-        counts = [s.modes.shape[0] + 1 for s in shapes]
-        expand = np.zeros((5, sum(counts)))
-        ends = np.cumsum(counts)
-        for s, end, r in zip(shapes, ends, counts):
-            expand[s.muscle_index, end - r:end] = 1.0
-        self.expand = as_t(expand)  # (5, R): which muscle's activation weighs each coefficient
-        self.slices = [(int(end - r), int(end)) for end, r in zip(ends, counts)]
-        self.n_coefficients = int(sum(counts))
-        self.node_counts = [s.n_nodes for s in shapes]
+        self.n_levels, self.n_t2 = len(moments.levels), moments.data.shape[1]
+        self._root_tables(moments, dtype)
+        self._shape_tables(moments, shapes, dtype)
         if mode_dtype is None:
             mode_dtype = torch.float16 if dtype == torch.float32 else dtype
         # buffers, not constants: the tracer then keeps the float16 storage and the cast in the graph
         for i, s in enumerate(shapes):
             self.register_buffer(f"modes_{i}", torch.as_tensor(s.modes, dtype=mode_dtype))
-        self.n_muscles = len(shapes)
         for i, s in enumerate(shapes):  # float32 storage: the mean surfaces are hundreds of mm
-            self.register_buffer(f"means_{i}", torch.as_tensor(s.mean.reshape(-1, 3) - s.origin, dtype=dtype))
-        # the affine turn of every muscle, [Q(theta)^T; O] (4 x 3) in homogeneous coordinates, as
-        # Hermite data: (2 n_t, 12 n_m) (O's slopes are 0)
-        affine = []
-        for s in shapes:
-            q = s.rotation_data.reshape(-1, 3, 3).transpose(0, 2, 1)
-            o = np.zeros((len(q), 1, 3))
-            o[: len(q) // 2] = s.origin
-            affine.append(np.concatenate([q, o], axis=1).reshape(len(q), 12))
-        self.affine_rows = as_t(np.concatenate(affine, axis=1))
+            self.register_buffer(f"means_{i}", torch.as_tensor(s.mean.reshape(1, -1), dtype=dtype))
+
+    def _root_tables(self, moments, dtype) -> None:
+        """The balance's data: activation weights, moment rows, the scan and the intervals' cubics."""
+        as_t = lambda a: torch.as_tensor(np.asarray(a), dtype=dtype)  # noqa: E731
+        basis = moments.theta_basis
+        n_t2, n_a = self.n_t2, self.n_levels
+        n_t, n_int = n_t2 // 2, len(basis.breaks) - 1
+        self.activation_tables = moments.activation_basis.torch_tables(dtype)
+        self.moment_rows = as_t(np.transpose(moments.data, (0, 2, 1)).reshape(5 * n_a, n_t2))
+        self.external_row, self.load_row = as_t(moments.external_data[None]), as_t(moments.load_data[None])
+        # the sign scan, and per scan interval: its two ends and the start of its table interval
+        grid, interval = moments.scan_deg, moments.scan_interval
+        self.scan_weights = as_t(moments.scan_weights.T)  # (2 n_t, n_g)
+        self.scan_distance = as_t(np.abs(grid[:-1] - moments.near_deg))
+        self.scan_index = torch.as_tensor(np.arange(len(grid) - 1), dtype=dtype)
+        start = basis.breaks[interval]
+        self.scan_ends = as_t(np.stack([grid[:-1] - start, grid[1:] - start, start], axis=1))  # (n_g - 1, 3)
+        self.scan_interval = torch.as_tensor(interval, dtype=torch.int64)
+        # per table interval: the power-form rows (t^3, t^2, t, 1) of the whole balance's weights and
+        # of their t-derivative, side by side (the balance's cubic and its slope as one (4, 2) matrix),
+        # and of the weights of its four Hermite data (values and slopes at its two angles)
+        c = basis.coefficients
+        slope = np.stack([np.zeros_like(c[0]), 3 * c[0], 2 * c[1], c[2]])
+        self.interval_rows = as_t(np.transpose(np.stack([c, slope], axis=1), (2, 0, 1, 3)).reshape(n_int, 8 * n_t2))
+        i = np.arange(n_int)
+        self.local_data = torch.as_tensor(np.stack([i, i + 1, n_t + i, n_t + i + 1], axis=1), dtype=torch.int64)
+        local = basis.coefficients[:, i[:, None], self.local_data.numpy()]  # (4 powers, n_int, 4 data)
+        self.local_rows = as_t(np.transpose(local, (1, 0, 2)))  # (n_int, 4, 4)
+
+    def _shape_tables(self, moments, shapes, dtype) -> None:
+        """Every muscle's Hermite data in theta, per level, side by side, and its turn if it has one."""
+        as_t = lambda a: torch.as_tensor(np.asarray(a), dtype=dtype)  # noqa: E731
+        n_t2, n_a = self.n_t2, self.n_levels
+        n_t = n_t2 // 2
+        # every muscle's coefficients side by side, per level: its POD coefficients, then 1 (value 1,
+        # slope 0: the weights reproduce constants) for its mean surface; a muscle reduced in its own
+        # frame (Q not I) then has the shift O (Q - I) of its turn x = (y + O (Q - I)) Q^T, which
+        # carries it on three unit rows (below)
+        identity = np.concatenate([np.tile(np.eye(3).ravel(), (n_t, 1)), np.zeros((n_t, 9))])
+        self.turned = [not np.array_equal(s.rotation_data, identity) for s in shapes]
+        parts, turns = [], []
+        for s, turned in zip(shapes, self.turned):
+            fixed = np.r_[np.ones(n_t), np.zeros(n_t)][:, None]
+            q = s.rotation_data.reshape(-1, 3, 3)
+            if turned:
+                shift = np.einsum("i,kij->kj", s.origin, q)
+                shift[: n_t] -= s.origin
+                fixed = np.concatenate([fixed, shift], axis=1)
+                turns.append(np.transpose(q, (0, 2, 1)).reshape(len(q), 9))  # Q^T
+            parts.append(np.concatenate([s.coefficient_data, np.repeat(fixed[:, None], n_a, axis=1)], axis=2))
+        counts = [s.modes.shape[0] + (4 if turned else 1) for s, turned in zip(shapes, self.turned)]
+        self.counts = counts
+        data = np.concatenate(parts, axis=2)  # (2 n_t, n_a, R)
+        self.n_coefficients = int(sum(counts))
+        self.n_muscles = len(shapes)
+        self.n_turned = len(turns)
+        self.theta_data = as_t(np.concatenate([data.reshape(n_t2, -1)] + turns, axis=1))
+        expand = np.zeros((5, sum(counts)))
+        ends = np.cumsum(counts)
+        for s, end, r in zip(shapes, ends, counts):
+            expand[s.muscle_index, end - r:end] = 1.0
+        self.expand = as_t(expand)  # (5, R): which muscle's activation weighs each coefficient
+        self.node_counts = [s.n_nodes for s in shapes]
 
     def _surface_rows(self, i: int, dtype) -> torch.Tensor:
-        """Muscle i's (r + 1, 4 n) rows: its modes and mean surface in homogeneous coordinates
-        (x, y, z, 0) and (x, y, z, 1). Built from the stored tensors by operators on constants only,
-        which the runtime folds once when it loads the graph."""
-        modes, mean = getattr(self, f"modes_{i}").to(dtype), getattr(self, f"means_{i}")
-        r, n = modes.shape[0], mean.shape[0]
-        modes = torch.nn.functional.pad(modes.reshape(r, n, 3), (0, 1)).reshape(r, 4 * n)  # pads, not stored zeros
-        mean = torch.nn.functional.pad(mean, (0, 1), value=1.0).reshape(1, 4 * n)
-        return torch.cat([modes, mean], dim=0)
+        """Muscle i's rows: its modes and its mean surface, (r + 1, 3 n), and for a muscle turned
+        from its own frame the unit rows of x, y and z too. Built from the stored tensors by
+        operators on constants only, which the runtime folds once when it loads the graph."""
+        rows = [getattr(self, f"modes_{i}").to(dtype), getattr(self, f"means_{i}")]
+        if self.turned[i]:
+            rows.append(torch.eye(3, dtype=dtype).repeat(1, rows[1].shape[1] // 3))
+        return torch.cat(rows, dim=0)
 
     def _bracket(self, g):
-        """One-hot (b, n_g - 1) of the scan interval holding the stable root nearest the hanging
-        arm; without one, the first interval (extends everywhere) or the last (flexes everywhere)."""
+        """Index (b, 1) of the scan interval holding the stable root nearest the hanging arm;
+        without one, the first interval (extends everywhere) or the last (flexes everywhere)."""
         down = (g[:, :-1] > 0) & (g[:, 1:] <= 0)
         fallback = _FAR + torch.where(g[:, :1] > 0, -self.scan_index, self.scan_index)
-        k = torch.argmin(torch.where(down, self.scan_distance, fallback), dim=1, keepdim=True)
-        return (self.scan_index == k).to(g.dtype)
+        return torch.argmin(torch.where(down, self.scan_distance, fallback), dim=1, keepdim=True)
 
     def _angle(self, profile):
-        """Elbow angle (b, 1) and the one-hot (b, n_int) of its table interval."""
+        """Elbow angle (b, 1), its table interval (b,), its offset t in it and 1 (each (b, 1, 1))."""
         g = profile @ self.scan_weights
-        pick = self._bracket(g)
-        lo, hi = pick @ self.scan_lo, pick @ self.scan_hi
-        g_lo = (pick * g[:, :-1]).sum(1, keepdim=True)
-        g_hi = (pick * g[:, 1:]).sum(1, keepdim=True)
-        interval = pick @ self.scan_interval
-        start = interval @ self.interval_start
-        a3, a2, a1, a0 = ((interval @ self.interval_rows).reshape(-1, 4, self.n_t2) * profile[:, None, :]).sum(2).split(1, 1)
+        k = self._bracket(g)
+        lo, hi, start = self.scan_ends[k[:, 0]].reshape(-1, 1, 3).split(1, 2)  # lo, hi: offsets in the interval
+        g_lo, g_hi = torch.gather(g, 1, torch.cat([k, k + 1], dim=1)).reshape(-1, 1, 2).split(1, 2)
+        interval = self.scan_interval[k[:, 0]]
+        # [[a3, 0], [a2, 3 a3], [a1, 2 a2], [a0, a1]]: (t^3, t^2, t, 1) @ it = (g, dg/dt)
+        cubic = (self.interval_rows[interval].reshape(-1, 8, self.n_t2) * profile[:, None, :]).sum(2).reshape(-1, 4, 2)
         falls = g_lo > g_hi
-        theta = torch.where(falls, lo + (hi - lo) * g_lo / torch.where(falls, g_lo - g_hi, 1.0), torch.where(g_lo > 0, hi, lo))
-        b3, b2 = 3 * a3, 2 * a2
+        t = torch.where(falls, lo + (hi - lo) * g_lo / torch.where(falls, g_lo - g_hi, 1.0), torch.where(g_lo > 0, hi, lo))
+        one = torch.ones_like(t)
         for _ in range(NEWTON_STEPS):
-            t = theta - start
-            value, slope = ((a3 * t + a2) * t + a1) * t + a0, (b3 * t + b2) * t + a1
-            descends = slope < 0
-            step = torch.where(descends, value / torch.where(descends, slope, -1.0), 0.0)
-            theta = torch.minimum(torch.maximum(theta - step, lo), hi)
-        return theta, interval, theta - start
+            t2 = t * t
+            value, slope = (torch.cat([t2 * t, t2, t, one], dim=2) @ cubic).split(1, 2)
+            t = torch.minimum(torch.maximum(t - value / slope.clamp(max=NEWTON_SLOPE_CAP), lo), hi)
+        return (start + t).reshape(-1, 1), interval, t, one
 
     def forward(self, activations, load_kg):
         # every reshape keeps the batch as -1 and names the other sizes: no Shape operators in the graph
         act_w = torch_weights(self.activation_tables, activations.reshape(-1, 1))  # (5 b, n_a)
         profile = act_w.reshape(-1, 5 * self.n_levels) @ self.moment_rows + self.external_row + load_kg * self.load_row
-        theta, interval, t = self._angle(profile)
+        theta, interval, t, one = self._angle(profile)
         t2 = t * t
-        w = torch.cat([interval * (t2 * t), interval * t2, interval * t, interval], dim=1) @ self.weight_rows  # (b, 2 n_t)
+        powers = torch.cat([t2 * t, t2, t, one], dim=2)  # (b, 1, 4)
+        weights = powers @ self.local_rows[interval]  # (b, 1, 4): the interval's four Hermite data
+        local = self.theta_data[self.local_data[interval]]  # (b, 4, n_a R + 9 n_m)
+        at_theta = (weights @ local).reshape(-1, self.theta_data.shape[1])
+        by_coefficient, turns = at_theta.split([self.n_levels * self.n_coefficients, 9 * self.n_turned], dim=1)
         by_level = act_w.reshape(-1, 5, self.n_levels).transpose(1, 2) @ self.expand  # (b, n_a, R)
-        coefficients = ((w @ self.coefficient_rows).reshape(-1, self.n_levels, self.n_coefficients) * by_level).sum(1)
-        affine = (w @ self.affine_rows).reshape(-1, self.n_muscles, 4, 3)
-        surfaces = [(coefficients[:, lo:hi] @ self._surface_rows(i, w.dtype)).reshape(-1, n, 4) @ affine[:, i]
-                    for i, ((lo, hi), n) in enumerate(zip(self.slices, self.node_counts))]
+        coefficients = (by_coefficient.reshape(-1, self.n_levels, self.n_coefficients) * by_level).sum(1)
+        turns = iter(turns.reshape(-1, self.n_turned, 3, 3).unbind(1)) if self.n_turned else iter(())
+        surfaces = []
+        for i, (c, n) in enumerate(zip(coefficients.split(self.counts, dim=1), self.node_counts)):
+            surface = (c @ self._surface_rows(i, t.dtype)).reshape(-1, n, 3)
+            surfaces.append(surface @ next(turns) if self.turned[i] else surface)
         return torch.cat(surfaces, dim=1), theta

@@ -21,12 +21,15 @@ from scipy.optimize import brentq
 from persival.surrogate.structured.cardinal import hermite_weights, spline_weights
 from persival.vocabulary import MUSCLES
 
-__all__ = ["ExternalMoments", "MomentModel", "ROOT_GRID_DEG", "NEWTON_STEPS"]
+__all__ = ["ExternalMoments", "MomentModel", "ROOT_GRID_DEG", "NEWTON_SLOPE_CAP", "NEWTON_STEPS"]
 
 ROOT_GRID_DEG = 0.5  # largest spacing of the sign scan that brackets the stable root
 # Newton steps on the bracket's cubic after regula falsi: the start is within about 1e-2 deg,
 # the first step brings it below 1e-6 deg (quadratic convergence), the second to round-off
 NEWTON_STEPS = 2
+# a Newton step divides by min(slope, this): where the balance does not descend (no Newton step
+# towards the stable root) the step leaves the bracket and is cut back to its end on the root's side
+NEWTON_SLOPE_CAP = -1e-12
 
 
 @dataclass(frozen=True)
@@ -153,7 +156,7 @@ class MomentModel:
         for _ in range(NEWTON_STEPS):
             g = np.einsum("bk,bk->b", self.theta_basis.weights(theta), profile)
             dg = np.einsum("bk,bk->b", self.theta_basis.derivative_weights(theta), profile)
-            theta = np.clip(theta - np.where(dg < 0, g / np.where(dg < 0, dg, -1.0), 0.0), lo, hi)
+            theta = np.clip(theta - g / np.minimum(dg, NEWTON_SLOPE_CAP), lo, hi)
         return theta
 
     def reference_root(self, activations, load_kg: float = 0.0) -> float:
