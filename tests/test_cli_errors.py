@@ -87,6 +87,8 @@ CASES = [
      "the 'analytic' simulator"),
     ("surrogate fit-structured", ["--store", "random.zarr", "--out", "new", "--tolerance", "0"], "zero tolerance",
      BOX),
+    ("surrogate fit-structured", ["--store", "random.zarr", "--out", "new", "--frame", "muscle"], "unknown frame",
+     "--frame must be 'world' or 'own'"),
     ("surrogate fit-sg", ["--store", "random.zarr", "--out", "new"], "foreign store (random design)", "sparse-grid"),
     ("surrogate fit-sg", ["--store", "random.zarr", "--out", "afile"], "file where a folder is expected",
      "is a file, not a folder"),
