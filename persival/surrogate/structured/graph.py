@@ -34,7 +34,7 @@ class StructuredGraph(torch.nn.Module):
         super().__init__()
         self.n_levels, self.n_t2 = len(moments.levels), moments.data.shape[1]
         self._root_tables(moments, dtype)
-        self._shape_tables(moments, shapes, dtype)
+        self._shape_tables(shapes, dtype)
         if mode_dtype is None:
             mode_dtype = torch.float16 if dtype == torch.float32 else dtype
         # buffers, not constants: the tracer then keeps the float16 storage and the cast in the graph
@@ -71,7 +71,7 @@ class StructuredGraph(torch.nn.Module):
         local = basis.coefficients[:, i[:, None], self.local_data.numpy()]  # (4 powers, n_int, 4 data)
         self.local_rows = as_t(np.transpose(local, (1, 0, 2)))  # (n_int, 4, 4)
 
-    def _shape_tables(self, moments, shapes, dtype) -> None:
+    def _shape_tables(self, shapes, dtype) -> None:
         """Every muscle's Hermite data in theta, per level, side by side, and its turn if it has one."""
         as_t = lambda a: torch.as_tensor(np.asarray(a), dtype=dtype)  # noqa: E731
         n_t2, n_a = self.n_t2, self.n_levels

@@ -24,8 +24,9 @@ from persival.vocabulary import MUSCLES
 __all__ = ["ExternalMoments", "MomentModel", "ROOT_GRID_DEG", "NEWTON_SLOPE_CAP", "NEWTON_STEPS"]
 
 ROOT_GRID_DEG = 0.5  # largest spacing of the sign scan that brackets the stable root
-# Newton steps on the bracket's cubic after regula falsi: the start is within about 1e-2 deg,
-# the first step brings it below 1e-6 deg (quadratic convergence), the second to round-off
+# Newton steps on the bracket's cubic after regula falsi: the start is within 7e-3 deg, the
+# first step brings it within 9e-6 deg, the second to 1e-11 (quadratic convergence; quick arm,
+# 300 random activations, docs/theory.md 7.7)
 NEWTON_STEPS = 2
 # a Newton step divides by min(slope, this): where the balance does not descend (no Newton step
 # towards the stable root) the step leaves the bracket and is cut back to its end on the root's side

@@ -25,7 +25,8 @@ __all__ = ["StructuredSurrogate", "DEFAULT_TOLERANCE_MM", "FRAMES"]
 
 # The POD truncation: 0.2 mm keeps the held-out error where 0.05 mm had it (quick run, 25 FE
 # states: mean 0.042 against 0.033 mm, worst 1.005 against 0.993 mm, the worst set by the angle)
-# with 71 modes instead of 96, which the exported graph reads once per state (docs/benchmarks.md)
+# with 61 modes (world frame) instead of 96 (own frame), which the exported graph reads once per
+# state (docs/benchmarks.md)
 DEFAULT_TOLERANCE_MM = 0.2
 FRAMES = ("world", "own")
 
