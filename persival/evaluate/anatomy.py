@@ -210,14 +210,15 @@ def check_outlines_table(console, model_file=None, out: Path | None = None) -> l
 
     kinematics = ArmKinematics(model_file, check_outlines=False)  # here they are reported, not refused
     rows = outline_overlaps(kinematics)
-    table = Table(title=f"{kinematics.spec.name}: outlines across the humerus overlapping each other or the bone "
-                        f"({len(rows)} at {len(LEVELS)} levels; muscles in their mesh poses)")
-    for column in ("level", "z (mm)", "outline", "inside", "vertices", "deepest (mm)"):
+    table = Table(title=f"{kinematics.spec.name}: outlines across the humerus overlapping each other or the bone, "
+                        f"or outside the skin ({len(rows)} at {len(LEVELS)} levels; muscles in their mesh poses)")
+    for column in ("level", "z (mm)", "outline", "in / outside", "vertices", "deepest (mm)"):
         table.add_column(column, justify="right" if column in ("z (mm)", "vertices", "deepest (mm)") else "left")
     for r in rows:
-        table.add_row(f"{100 * r['level']:.0f} %", f"{r['z_mm']:g}", r["outline"], r["inside"], f"{r['vertices']}/{r['of']}",
+        where = r["inside"] if r["relation"] == "in" else f"outside the {r['inside']}"
+        table.add_row(f"{100 * r['level']:.0f} %", f"{r['z_mm']:g}", r["outline"], where, f"{r['vertices']}/{r['of']}",
                       f"{r['deepest_mm']:.1f}")
-    console.print(table if rows else "no outlines overlap at any level")
+    console.print(table if rows else "no outlines overlap or leave the skin at any level")
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(json.dumps({"model": kinematics.spec.name, "levels": list(LEVELS), "overlaps": rows}, indent=1))

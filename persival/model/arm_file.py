@@ -274,6 +274,10 @@ class ArmModelFile(_Strict):
     bones: list[Bone]
     walls: list[Wall] = Field(default_factory=list)
     muscles: list[Muscle]
+    # The upper arm's skin where it crosses planes z = const (persival.model.cross_sections): a model
+    # file that gives it has every muscle's outline checked to lie inside it, as an atlas draws them.
+    skin: list[Outline] = Field(default_factory=list, description="the upper arm's outline at heights z (ellipses, "
+                                                                  "upper-arm frame); between them interpolated")
     profiles: dict[str, Profile]
 
     @model_validator(mode="after")
@@ -320,6 +324,9 @@ class ArmModelFile(_Strict):
             if unknown:
                 raise ValueError(f"muscle {m.name!r} wraps over unknown bone(s) or wall(s) {unknown}; the bones and "
                                  f"walls are {bone_names}")
+        heights = [o.z for o in self.skin]
+        if len(set(heights)) != len(heights):
+            raise ValueError("skin: two outlines at the same height z")
         if not self.profiles:
             raise ValueError("at least one mesh profile is required")
         return self

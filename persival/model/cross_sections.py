@@ -9,7 +9,9 @@ the muscle's outline lies inside the bone's surface (:mod:`persival.model.bone_s
 vertex of the bone's outline inside the muscle's. Reported per
 level and pair: the vertices inside and the deepest of them (its distance to the other
 outline, or to the bone's surface), as the 3D check of solved states does
-(:mod:`persival.model.anatomy_check`).
+(:mod:`persival.model.anatomy_check`). A model file that draws the upper arm's skin (its outline
+at heights, interpolated between them) has every muscle vertex outside it reported too: a layout
+that leaves the arm.
 """
 
 from __future__ import annotations
@@ -21,14 +23,14 @@ from persival.model.arm_body import ArmKinematics
 from persival.model.arm_file import ModelFileError
 from persival.model.bone_shapes import ElbowFrame, bone_shapes
 
-__all__ = ["LEVELS", "OutlineOverlapError", "check_outlines", "outline_overlaps", "outlines_at"]
+__all__ = ["LEVELS", "OutlineOverlapError", "check_outlines", "outline_overlaps", "outlines_at", "skin_at"]
 
 LEVELS = (0.1, 0.3, 0.5, 0.7, 0.9)
 VERTICES = 72
 
 
 class OutlineOverlapError(ModelFileError):
-    """A model whose muscles' outlines overlap each other or a bone at some level."""
+    """A model whose muscles' outlines overlap each other or a bone, or leave the skin, at some level."""
 
 
 def outlines_at(kinematics: ArmKinematics, z: float) -> dict[str, list[np.ndarray]]:
@@ -100,6 +102,7 @@ def outline_overlaps(kinematics: ArmKinematics, levels=LEVELS) -> list[dict]:
     for level in levels:
         z = z_lo + level * (z_hi - z_lo)
         outlines = outlines_at(kinematics, z)
+        skin = skin_at(kinematics.spec, z)
         for a, rings_a in outlines.items():
             for ring_a in rings_a:
                 for b, rings_b in outlines.items():
@@ -116,7 +119,28 @@ def outline_overlaps(kinematics: ArmKinematics, levels=LEVELS) -> list[dict]:
                     inside = _inside_polygon(section, ring_a) if len(section) else np.zeros(0, dtype=bool)
                     if inside.any():
                         rows.append(_row(level, z, bone.name, a, inside, _distance_to_ring(section[inside], ring_a)))
+                if skin is not None:
+                    outside = ~_inside_polygon(ring_a, skin)
+                    if outside.any():
+                        rows.append(_row(level, z, a, "skin", outside, _distance_to_ring(ring_a[outside], skin),
+                                         relation="outside"))
     return rows
+
+
+def skin_at(spec, z: float) -> np.ndarray | None:
+    """The upper arm's skin at height z (VERTICES, 3): the model file's outlines interpolated
+    linearly in z (centre, semi-axes, direction), the nearest one beyond them; None if it has none."""
+    if not spec.skin:
+        return None
+    skin = sorted(spec.skin, key=lambda o: o.z)
+    heights = [o.z for o in skin]
+    table = np.array([[*o.centre, *o.semi_axes, o.angle_deg] for o in skin])
+    cx, cy, a, b, angle = (np.interp(z, heights, column) for column in table.T)
+    centre, angle = np.array([cx, cy]), np.radians(angle)
+    phi = np.linspace(0.0, 2.0 * np.pi, VERTICES, endpoint=False)
+    major, minor = np.array([np.cos(angle), np.sin(angle)]), np.array([-np.sin(angle), np.cos(angle)])
+    ring = centre + a * np.cos(phi)[:, None] * major + b * np.sin(phi)[:, None] * minor
+    return np.column_stack([ring, np.full(VERTICES, z)])
 
 
 def _bone_section(bone: Body, frame: ElbowFrame, z: float) -> np.ndarray:
@@ -125,16 +149,22 @@ def _bone_section(bone: Body, frame: ElbowFrame, z: float) -> np.ndarray:
     return frame.local(np.asarray(cut.points, dtype=float)) if cut.n_points else np.zeros((0, 3))
 
 
-def _row(level: float, z: float, a: str, b: str, inside: np.ndarray, depth: np.ndarray) -> dict:
-    return {"level": level, "z_mm": round(float(z), 1), "outline": a, "inside": b, "vertices": int(inside.sum()),
-            "of": len(inside), "deepest_mm": round(float(depth.max()), 2)}
+def _row(level: float, z: float, a: str, b: str, inside: np.ndarray, depth: np.ndarray, relation: str = "in") -> dict:
+    """One finding: ``relation`` "in" (a's vertices inside b) or "outside" (a's vertices outside
+    b, the skin), with how many and the deepest."""
+    return {"level": level, "z_mm": round(float(z), 1), "outline": a, "relation": relation, "inside": b,
+            "vertices": int(inside.sum()), "of": len(inside), "deepest_mm": round(float(depth.max()), 2)}
 
 
 def check_outlines(kinematics: ArmKinematics, levels=LEVELS) -> None:
-    """Refuse a model whose outlines overlap: one message naming the muscles and the levels."""
+    """Refuse a model whose outlines overlap or leave the skin: one message naming the muscles and
+    the levels."""
     rows = outline_overlaps(kinematics, levels)
     if rows:
         worst = sorted(rows, key=lambda r: -r["deepest_mm"])
-        listed = "; ".join(f"{r['outline']} in {r['inside']} at {100 * r['level']:.0f} % of the humerus "
-                           f"(z = {r['z_mm']:g} mm, {r['deepest_mm']:.1f} mm deep)" for r in worst)
-        raise OutlineOverlapError(f"{kinematics.spec.name}: the muscles' outlines overlap: {listed}")
+        listed = "; ".join(f"{r['outline']} {'in' if r['relation'] == 'in' else 'outside the'} {r['inside']} at "
+                           f"{100 * r['level']:.0f} % of the humerus "
+                           f"(z = {r['z_mm']:g} mm, {r['deepest_mm']:.1f} mm {'deep' if r['relation'] == 'in' else 'out'})"
+                           for r in worst)
+        what = "overlap" if all(r["relation"] == "in" for r in rows) else "overlap or leave the skin"
+        raise OutlineOverlapError(f"{kinematics.spec.name}: the muscles' outlines {what}: {listed}")

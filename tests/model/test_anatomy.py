@@ -158,3 +158,27 @@ def test_outlines_are_the_muscles_cross_sections_and_overlaps_are_refused_by_nam
     assert distance.min() == pytest.approx(r, rel=1e-6) and distance.max() == pytest.approx(r * tilt, rel=1e-3)
     with pytest.raises(OutlineOverlapError, match=r"brachialis in biceps at 30 % of the humerus \(z = 81.7 mm"):
         check_outlines(arm)
+
+
+def test_a_layout_that_leaves_the_skin_is_refused_naming_the_muscle_and_level(tmp_path):
+    """The atlas-with-walls file draws the skin: its outlines lie inside it; the skin is the
+    model file's ellipses, interpolated between their heights; the same file with a mid-arm skin
+    10 mm narrower front to back is refused before anything is meshed, naming the biceps."""
+    from pathlib import Path
+
+    from persival.model.arm_body import ArmKinematics
+    from persival.model.cross_sections import OutlineOverlapError, outline_overlaps, skin_at
+
+    source = Path("persival/model/variants/atlas_walls.toml")
+    atlas = ArmKinematics(source)  # checked on loading: nothing overlaps or leaves the skin
+    assert not outline_overlaps(atlas)
+    ring = skin_at(atlas.spec, 145.0)
+    assert np.allclose([ring[:, 0].min(), ring[:, 0].max(), ring[:, 1].min(), ring[:, 1].max()],
+                       [4.0 - 45.0, 4.0 + 45.0, 11.0 - 55.0, 11.0 + 55.0], atol=1e-9)
+    halfway = skin_at(atlas.spec, 82.5)  # between the outlines at 20 and 145 mm
+    assert halfway[:, 1].max() == pytest.approx(10.5 + 53.5) and np.allclose(halfway[:, 2], 82.5)
+    narrow = tmp_path / "narrow_skin.toml"
+    narrow.write_text(source.read_text().replace("semi_axes = [55.0, 45.0]", "semi_axes = [45.0, 44.0]"))
+    with pytest.raises(OutlineOverlapError, match=r"outlines overlap or leave the skin: .*biceps outside the skin at "
+                                                  r"50 % of the humerus \(z = 144.7 mm, 4.5 mm out\)"):
+        ArmKinematics(narrow)
