@@ -47,8 +47,9 @@ class SolverOptions:
     # narrow (deg) while the residual is within joint_noise_factor of the tolerance: muscles in
     # frictionless contact with a wall carry a moment noise of a few hundredths of a N mm (0.03 N mm
     # measured in a hanging arm), which can keep |g| above a 2e-4 N mm tolerance at a root already
-    # bracketed, or keep g's sign while the iteration creeps towards the root (8.2e-4 N mm, 33.32 deg)
-    joint_bracket_deg: float = 1e-4
+    # bracketed, or keep g's sign while the iteration creeps towards the root (8.2e-4 N mm, 33.32 deg;
+    # 0.21 N mm at 140.32 deg with the flexors fully active, a Newton step of 6e-4 deg)
+    joint_bracket_deg: float = 1e-3
     joint_noise_factor: float = 1e3
     backend: str = "auto"
     # Newton directions from the last factorization this solver made (of a nearby tangent: an
