@@ -70,3 +70,8 @@ def test_the_atlas_walls_variant_keeps_biceps_and_brachialis_on_either_side_of_i
     assert normals["brachialis"] @ [0.0, 1.0, 0.0] == pytest.approx(-1.0)  # the brachialis behind, on the bone
     assert "Capsule" in {type(o).__name__ for o in ArmModel._bones_of(frame, frame.spec.muscle("brachialis"),
                                                                         line)(20.0)}
+    triceps = frame.spec.muscle("triceps")  # and the deep fascia behind the triceps keeps it on the bone
+    line = frame.centre_line(triceps)
+    walls = {type(o).__name__: o for o in ArmModel._bones_of(frame, triceps, line)(20.0)}
+    fascia = walls["Septum"]
+    assert fascia.normal @ [0.0, 1.0, 0.0] == pytest.approx(1.0) and fascia.project(line)[0].max() <= 0.0
