@@ -233,8 +233,8 @@ class ArmModel(ArmStateCache, ArmBody):
         equivalent of the bordered system). Its derivative is the Schur complement of every
         muscle (exact, so the iteration converges quadratically); a bracket of the root and a
         largest step keep it from jumping past a stiff joint limit, and a trial angle whose
-        muscles fail to converge is pulled back halfway. A root located to ``joint_bracket_deg``
-        (bracket or Newton step) ends it too, where the muscles' noise floor keeps |g| just above
+        muscles fail to converge is pulled back halfway. A bracket narrower than
+        ``joint_bracket_deg`` ends it too, where the muscles' noise floor keeps |g| just above
         the tolerance.
         """
         opts = self.options
@@ -246,7 +246,7 @@ class ArmModel(ArmStateCache, ArmBody):
         lower, upper = self.spec.joint.limits_deg
         for _ in range(60):
             tolerance = self.moment_tolerance(states)
-            if abs(g) <= tolerance or (self._root_within(g, dg, lo, hi) and abs(g) <= opts.joint_noise_factor * tolerance):
+            if abs(g) <= tolerance or (hi - lo <= opts.joint_bracket_deg and abs(g) <= opts.joint_noise_factor * tolerance):
                 break
             if g > 0:
                 hi = min(hi, theta)
@@ -273,13 +273,6 @@ class ArmModel(ArmStateCache, ArmBody):
         else:
             raise ConvergenceError(f"joint equilibrium not found: moment residual {g:.3e} N mm at {theta:.2f} deg")
         return self._arm_state(target, theta, g, dg, states, stats)
-
-    def _root_within(self, g: float, dg: float, lo: float, hi: float) -> bool:
-        """Whether the root is located to ``joint_bracket_deg``: by a bracket that narrow, or, where
-        the iteration creeps towards it from one side (the noise floor keeps g's sign), by a Newton
-        step that short on a stable joint (dg > 0)."""
-        width = self.options.joint_bracket_deg
-        return hi - lo <= width or (dg > 0 and abs(np.degrees(g / dg)) <= width)
 
     def _arm_state(self, target, theta: float, g: float, dg: float, states: dict[str, MuscleState], stats: dict) -> ArmState:
         """The ArmState of muscle states at theta, with the joint's residual g and stiffness dg."""

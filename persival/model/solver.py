@@ -43,13 +43,11 @@ class SolverOptions:
     moment_rtol: float = 1e-7
     max_angle_step: float = 5.0  # deg, largest hinge-angle change of one Newton iteration
     joint_max_step: float = 15.0  # deg, largest angle change of one staggered joint iteration (ArmModel)
-    # ... and the root is taken as found once its bracket, or the Newton step towards it, is this
-    # narrow (deg) while the residual is within joint_noise_factor of the tolerance: muscles in
-    # frictionless contact with a wall carry a moment noise of a few hundredths of a N mm (0.03 N mm
-    # measured in a hanging arm), which can keep |g| above a 2e-4 N mm tolerance at a root already
-    # bracketed, or keep g's sign while the iteration creeps towards the root (8.2e-4 N mm, 33.32 deg;
-    # 0.21 N mm at 140.32 deg with the flexors fully active, a Newton step of 6e-4 deg)
-    joint_bracket_deg: float = 1e-3
+    # ... and the root is taken as found once its bracket is this narrow (deg) while the residual
+    # is within joint_noise_factor of the tolerance: muscles in frictionless contact with a wall
+    # carry a moment noise of a few hundredths of a N mm (0.03 N mm measured in a hanging arm),
+    # which can keep |g| above a 2e-4 N mm tolerance at a root already bracketed
+    joint_bracket_deg: float = 1e-4
     joint_noise_factor: float = 1e3
     backend: str = "auto"
     # Newton directions from the last factorization this solver made (of a nearby tangent: an
