@@ -206,17 +206,16 @@ def check_outlines_table(console, model_file=None, out: Path | None = None) -> l
     of the overlaps per level, and the JSON file."""
     from rich.table import Table
 
-    from persival.model.cross_sections import LEVELS, outline_overlaps
+    from persival.model.cross_sections import LEVELS, outline_overlaps, where
 
     kinematics = ArmKinematics(model_file, check_outlines=False)  # here they are reported, not refused
     rows = outline_overlaps(kinematics)
     table = Table(title=f"{kinematics.spec.name}: outlines across the humerus overlapping each other or the bone, "
                         f"or outside the skin ({len(rows)} at {len(LEVELS)} levels; muscles in their mesh poses)")
-    for column in ("level", "z (mm)", "outline", "in / outside", "vertices", "deepest (mm)"):
+    for column in ("level", "z (mm)", "outline", "where", "vertices", "deepest (mm)"):
         table.add_column(column, justify="right" if column in ("z (mm)", "vertices", "deepest (mm)") else "left")
     for r in rows:
-        where = r["inside"] if r["relation"] == "in" else f"outside the {r['inside']}"
-        table.add_row(f"{100 * r['level']:.0f} %", f"{r['z_mm']:g}", r["outline"], where, f"{r['vertices']}/{r['of']}",
+        table.add_row(f"{100 * r['level']:.0f} %", f"{r['z_mm']:g}", r["outline"], where(r), f"{r['vertices']}/{r['of']}",
                       f"{r['deepest_mm']:.1f}")
     console.print(table if rows else "no outlines overlap or leave the skin at any level")
     if out is not None:

@@ -167,6 +167,12 @@ class Outline(_Strict):
         return self
 
 
+def _distinct_heights(outlines: list[Outline], owner: str) -> None:
+    heights = [o.z for o in outlines]
+    if len(set(heights)) != len(heights):
+        raise ValueError(f"{owner}: two outlines at the same height z")
+
+
 class Muscle(_Strict):
     name: str
     action: Literal["flexor", "extensor"]
@@ -236,9 +242,7 @@ class Muscle(_Strict):
         clash = [k for k, on in (("surface", self.surface is not None), ("via", bool(self.via)), ("bow", self.bow > 0)) if on]
         if clash:
             raise ValueError(f"muscle {self.name!r}: outlines place its belly; drop {', '.join(clash)}")
-        heights = [o.z for o in self.outlines]
-        if len(set(heights)) != len(heights):
-            raise ValueError(f"muscle {self.name!r}: two outlines at the same height z")
+        _distinct_heights(self.outlines, f"muscle {self.name!r}")
         thin = [o.z for o in self.outlines if o.semi_axes[1] <= max(self.tendon_radius)]
         if thin:
             raise ValueError(f"muscle {self.name!r}: the outline at z = {thin[0]:g} mm is thinner than its tendons "
@@ -324,9 +328,7 @@ class ArmModelFile(_Strict):
             if unknown:
                 raise ValueError(f"muscle {m.name!r} wraps over unknown bone(s) or wall(s) {unknown}; the bones and "
                                  f"walls are {bone_names}")
-        heights = [o.z for o in self.skin]
-        if len(set(heights)) != len(heights):
-            raise ValueError("skin: two outlines at the same height z")
+        _distinct_heights(self.skin, "skin")
         if not self.profiles:
             raise ValueError("at least one mesh profile is required")
         return self

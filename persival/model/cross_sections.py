@@ -23,7 +23,7 @@ from persival.model.arm_body import ArmKinematics
 from persival.model.arm_file import ModelFileError
 from persival.model.bone_shapes import ElbowFrame, bone_shapes
 
-__all__ = ["LEVELS", "OutlineOverlapError", "check_outlines", "outline_overlaps", "outlines_at", "skin_at"]
+__all__ = ["LEVELS", "OutlineOverlapError", "check_outlines", "outline_overlaps", "outlines_at", "skin_at", "where"]
 
 LEVELS = (0.1, 0.3, 0.5, 0.7, 0.9)
 VERTICES = 72
@@ -156,15 +156,18 @@ def _row(level: float, z: float, a: str, b: str, inside: np.ndarray, depth: np.n
             "vertices": int(inside.sum()), "of": len(inside), "deepest_mm": round(float(depth.max()), 2)}
 
 
+def where(row: dict) -> str:
+    """Where a finding's outline lies: "in <body>" or "outside the skin"."""
+    return f"{'in' if row['relation'] == 'in' else 'outside the'} {row['inside']}"
+
+
 def check_outlines(kinematics: ArmKinematics, levels=LEVELS) -> None:
     """Refuse a model whose outlines overlap or leave the skin: one message naming the muscles and
     the levels."""
     rows = outline_overlaps(kinematics, levels)
     if rows:
         worst = sorted(rows, key=lambda r: -r["deepest_mm"])
-        listed = "; ".join(f"{r['outline']} {'in' if r['relation'] == 'in' else 'outside the'} {r['inside']} at "
-                           f"{100 * r['level']:.0f} % of the humerus "
-                           f"(z = {r['z_mm']:g} mm, {r['deepest_mm']:.1f} mm {'deep' if r['relation'] == 'in' else 'out'})"
-                           for r in worst)
+        listed = "; ".join(f"{r['outline']} {where(r)} at {100 * r['level']:.0f} % of the humerus (z = {r['z_mm']:g} "
+                           f"mm, {r['deepest_mm']:.1f} mm {'deep' if r['relation'] == 'in' else 'out'})" for r in worst)
         what = "overlap" if all(r["relation"] == "in" for r in rows) else "overlap or leave the skin"
         raise OutlineOverlapError(f"{kinematics.spec.name}: the muscles' outlines {what}: {listed}")
