@@ -233,9 +233,8 @@ class ArmModel(ArmStateCache, ArmBody):
         equivalent of the bordered system). Its derivative is the Schur complement of every
         muscle (exact, so the iteration converges quadratically); a bracket of the root and a
         largest step keep it from jumping past a stiff joint limit, and a trial angle whose
-        muscles fail to converge is pulled back halfway. A bracket narrower than
-        ``joint_bracket_deg`` ends it too, where the muscles' noise floor keeps |g| just above
-        the tolerance.
+        muscles fail to converge is pulled back halfway. Where the muscles' noise floor keeps |g|
+        just above the tolerance, the root located by other means ends it too (``_at_noise_floor``).
         """
         opts = self.options
         stats: dict = {"joint_iterations": 0, "iterations": 0}
@@ -244,10 +243,12 @@ class ArmModel(ArmStateCache, ArmBody):
         g, dg, states = self.moment_balance(theta, target, start, stats, tracker)
         lo, hi = -np.inf, np.inf  # bracket: g(lo) < 0 < g(hi) (g grows with theta when stable)
         lower, upper = self.spec.joint.limits_deg
+        g_before = np.inf
         for _ in range(60):
             tolerance = self.moment_tolerance(states)
-            if abs(g) <= tolerance or (hi - lo <= opts.joint_bracket_deg and abs(g) <= opts.joint_noise_factor * tolerance):
+            if abs(g) <= tolerance or self._at_noise_floor(g, g_before, dg, hi - lo, tolerance):
                 break
+            g_before = g
             if g > 0:
                 hi = min(hi, theta)
             else:
@@ -273,6 +274,18 @@ class ArmModel(ArmStateCache, ArmBody):
         else:
             raise ConvergenceError(f"joint equilibrium not found: moment residual {g:.3e} N mm at {theta:.2f} deg")
         return self._arm_state(target, theta, g, dg, states, stats)
+
+    def _at_noise_floor(self, g: float, g_before: float, dg: float, bracket: float, tolerance: float) -> bool:
+        """Whether |g|, within ``joint_noise_factor`` of the tolerance, is the muscles' noise floor
+        at a root already located: bracketed within ``joint_bracket_deg``, or, where the floor keeps
+        g's sign, approached from that side by steps that no longer reduce |g| (``joint_stall_ratio``)
+        and are shorter than ``joint_stall_deg``. A converging iteration reduces |g| by far more
+        per step, so it goes on to the tolerance."""
+        opts = self.options
+        if abs(g) > opts.joint_noise_factor * tolerance:
+            return False
+        stalled = g * g_before > 0 and abs(g) >= opts.joint_stall_ratio * abs(g_before) and dg > 0
+        return bracket <= opts.joint_bracket_deg or (stalled and abs(np.degrees(g / dg)) <= opts.joint_stall_deg)
 
     def _arm_state(self, target, theta: float, g: float, dg: float, states: dict[str, MuscleState], stats: dict) -> ArmState:
         """The ArmState of muscle states at theta, with the joint's residual g and stiffness dg."""

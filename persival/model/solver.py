@@ -49,6 +49,12 @@ class SolverOptions:
     # which can keep |g| above a 2e-4 N mm tolerance at a root already bracketed
     joint_bracket_deg: float = 1e-4
     joint_noise_factor: float = 1e3
+    # ... or where the floor keeps g's sign and the iteration creeps towards the root from one side
+    # (8.2e-4 N mm at 33.32 deg in a hanging arm; 0.21 N mm at 140.3 deg with the flexors fully
+    # active, by Newton steps of 6e-4 deg): once a step cuts |g| by less than this ratio and the next
+    # one would be shorter than joint_stall_deg
+    joint_stall_ratio: float = 0.9
+    joint_stall_deg: float = 1e-3
     backend: str = "auto"
     # Newton directions from the last factorization this solver made (of a nearby tangent: an
     # earlier iteration, or the previous solve of the same body), refined against the current

@@ -41,3 +41,16 @@ def test_a_residual_far_above_the_noise_floor_is_still_refused(arm, monkeypatch)
     monkeypatch.setattr(arm, "moment_balance", _noisy_balance(5.0))
     with pytest.raises(ConvergenceError, match="joint equilibrium not found"):
         arm._equilibrium(np.zeros(5), {}, 20.0, SolveTracker(None))
+
+
+def test_a_root_approached_from_one_side_ends_the_iteration_at_the_noise_floor(arm, monkeypatch):
+    """A stale slope (twice the true one) and a floor that keeps g's sign: the iteration creeps
+    towards the root from below and never brackets it; once its steps no longer reduce |g| and
+    are shorter than joint_stall_deg, the root is located."""
+    def creeping(theta_deg, activations, start, statistics=None, tracker=None):
+        g = STIFFNESS * np.radians(theta_deg - ROOT_DEG)
+        return min(g, 0.0) - 8.2e-4, 2.0 * STIFFNESS, {}
+    monkeypatch.setattr(arm, "moment_balance", creeping)
+    theta, g = arm._equilibrium(np.zeros(5), {}, 20.0, SolveTracker(None))
+    assert abs(theta - ROOT_DEG) <= arm.options.joint_stall_deg
+    assert 8.2e-4 <= abs(g) <= 8.2e-4 * 1.2
