@@ -54,3 +54,17 @@ def test_a_root_approached_from_one_side_ends_the_iteration_at_the_noise_floor(a
     theta, g = arm._equilibrium(np.zeros(5), {}, 20.0, SolveTracker(None))
     assert abs(theta - ROOT_DEG) <= arm.options.joint_stall_deg
     assert 8.2e-4 <= abs(g) <= 8.2e-4 * 1.2
+
+
+def test_a_slope_several_times_too_steep_is_replaced_by_the_secant(arm, monkeypatch):
+    """Muscles whose near corrections keep a chord 4.5 times the joint's true stiffness: Newton
+    steps alone cut g by 0.78 per step and run out of iterations; the secant of a step that cut
+    |g| by less than half finds the root in a few more balances."""
+    calls = []
+    def stiff_chord(theta_deg, activations, start, statistics=None, tracker=None):
+        calls.append(theta_deg)
+        return STIFFNESS * np.radians(theta_deg - ROOT_DEG), 4.5 * STIFFNESS, {}
+    monkeypatch.setattr(arm, "moment_balance", stiff_chord)
+    theta, g = arm._equilibrium(np.zeros(5), {}, 20.0, SolveTracker(None))
+    assert abs(g) <= 2e-4 and abs(theta - ROOT_DEG) < 1e-5
+    assert len(calls) <= 5
