@@ -279,7 +279,7 @@ class ArmModel(ArmStateCache, ArmBody):
 
     @staticmethod
     def _step_slope(theta: float, g: float, trial: float, g_trial: float, dg_trial: float) -> float:
-        """The slope (N mm/rad) of the next step: the muscles' Schur complement dg, or the secant
+        """The slope (N mm/rad) of the next step (docs/theory.md, 3.7): the muscles' Schur complement dg, or the secant
         of the last step where that step kept g's sign and cut |g| by less than half. The muscles'
         near corrections keep their start's slope (moment_balance), and with walls that chord
         can be several times too steep: a hanging arm crept from -7.1 to -4.7e-4 N mm at 0.78 per
