@@ -231,7 +231,8 @@ class ArmModel(ArmStateCache, ArmBody):
     def _equilibrium(self, target, start: dict[str, MuscleState], angle: float, tracker: SolveTracker) -> ArmState:
         """Solve g(theta) = 0 by a safeguarded Newton iteration on theta (docs/theory.md, 3.7: an
         equivalent of the bordered system). Its derivative is the Schur complement of every
-        muscle (exact, so the iteration converges quadratically); a bracket of the root and a
+        muscle (exact, so the iteration converges quadratically; a secant where the muscles' chord
+        slopes make it creep, ``_step_slope``); a bracket of the root and a
         largest step keep it from jumping past a stiff joint limit, and a trial angle whose
         muscles fail to converge is pulled back halfway. Where the muscles' noise floor keeps |g|
         just above the tolerance, the root located by other means ends it too (``_at_noise_floor``).
@@ -279,11 +280,11 @@ class ArmModel(ArmStateCache, ArmBody):
 
     @staticmethod
     def _step_slope(theta: float, g: float, trial: float, g_trial: float, dg_trial: float) -> float:
-        """The slope (N mm/rad) of the next step (docs/theory.md, 3.7): the muscles' Schur complement dg, or the secant
-        of the last step where that step kept g's sign and cut |g| by less than half. The muscles'
-        near corrections keep their start's slope (moment_balance), and with walls that chord
-        can be several times too steep: a hanging arm crept from -7.1 to -4.7e-4 N mm at 0.78 per
-        step and ran out of iterations."""
+        """The slope (N mm/rad) of the next step (docs/theory.md, 3.7): the muscles' Schur complement
+        dg, or the secant of the last step where that step kept g's sign and cut |g| by less than
+        half. The muscles' near corrections keep their start's slope (moment_balance), and with
+        walls that chord can be several times too steep: a hanging arm crept from -7.1 to
+        -4.7e-4 N mm at 0.78 per step and ran out of iterations."""
         if g * g_trial > 0 and abs(g_trial) > 0.5 * abs(g) and trial != theta:
             secant = (g_trial - g) / np.radians(trial - theta)
             if secant > 0:
