@@ -22,6 +22,7 @@ from persival.model.arm_cache import ArmStateCache
 from persival.model.arm_file import Muscle
 from persival.model.arm_state import ArmState
 from persival.model.assembly import MaterialField
+from persival.model.bone_fields import bone_fields
 from persival.model.contact import bone_obstacles
 from persival.model.mesh import Tet10Mesh
 from persival.model.muscle_state import MusclePath, MuscleState
@@ -70,6 +71,7 @@ class ArmModel(ArmStateCache, ArmBody):
             mesh_angle_deg=muscle.mesh_angle_deg,
             bones=self._bones_of(muscle, mesh.points) if muscle.wraps else None,
             penalty=self.spec.contact.penalty,
+            attachment_mm=self.spec.contact.attachment_mm if self.spec.contact.bone_surfaces else 0.0,
             insertion_tie=muscle.insertion_tie,
             hinge=(self.centre, self.axis),
         )
@@ -82,7 +84,8 @@ class ArmModel(ArmStateCache, ArmBody):
         bones = [self.spec.bone(name) for name in muscle.wraps if name in bone_names]
         walls = [self.spec.wall(name) for name in muscle.wraps if name not in bone_names]
         sides = septum_sides(walls, self.centre, self.axis, muscle.mesh_angle_deg, mesh_points)
-        return lambda theta: (bone_obstacles(bones, self.centre, self.axis, theta)
+        fields = bone_fields(self.spec) if self.spec.contact.bone_surfaces and bones else None
+        return lambda theta: (bone_obstacles(bones, self.centre, self.axis, theta, fields)
                               + wall_obstacles(walls, self.centre, self.axis, theta, sides))
 
     def set_options(self, options: SolverOptions) -> None:

@@ -149,6 +149,10 @@ class Wall(_Strict):
 
 class Contact(_Strict):
     penalty: float = Field(1.0, gt=0, description="N/mm^3: contact pressure per mm of penetration (docs/theory.md, 3.5)")
+    bone_surfaces: bool = Field(False, description="bones with a drawn shape touch the muscles that wrap them by "
+                                "their shaped surfaces (a sampled distance field), not by their capsules")
+    attachment_mm: float = Field(10.0, ge=0, description="mm: a muscle's surface this near its two ends (its "
+                                 "attachments) does not touch the shaped surfaces")
 
 
 class Outline(_Strict):

@@ -129,13 +129,38 @@ class HalfSpace:
         return self.transformed(rotation_about(axis, theta_deg), centre)
 
 
-def bone_obstacles(bones, centre, axis, theta_deg: float) -> list[Capsule]:
-    """Capsules of model-file bones at elbow angle theta: ``forearm`` bones (given at theta = 0)
-    turn about the hinge, ``upper_arm`` bones stay (docs/theory.md, 3.5)."""
+@dataclass(frozen=True)
+class Faded:
+    """An obstacle whose penetration is scaled by ``share`` in [0, 1], so its penalty energy by
+    share^2: contact switched on gradually where a mesh starts inside a bone (force and tangent
+    stay the exact derivatives of that energy)."""
+
+    obstacle: object
+    share: float
+
+    @property
+    def name(self) -> str:
+        return self.obstacle.name
+
+    @property
+    def spares_ends(self) -> bool:
+        return getattr(self.obstacle, "spares_ends", False)
+
+    def project(self, x: np.ndarray):
+        g, n, dn_dx = self.obstacle.project(x)
+        s = self.share
+        return s * g, s * n, (lambda mask: s * dn_dx(mask))
+
+
+def bone_obstacles(bones, centre, axis, theta_deg: float, fields: dict | None = None) -> list:
+    """Obstacles of model-file bones at elbow angle theta: their shaped surfaces where ``fields``
+    (name -> persival.model.bone_fields.DistanceField) has them, else their capsules;
+    ``forearm`` bones (given at theta = 0) turn about the hinge, ``upper_arm`` bones stay
+    (docs/theory.md, 3.5)."""
     out = []
     for bone in bones:
-        capsule = Capsule.from_bone(bone)
-        out.append(capsule.rotated(axis, centre, theta_deg) if bone.segment == "forearm" else capsule)
+        obstacle = (fields or {}).get(bone.name) or Capsule.from_bone(bone)
+        out.append(obstacle.rotated(axis, centre, theta_deg) if bone.segment == "forearm" else obstacle)
     return out
 
 
@@ -187,7 +212,7 @@ class ObstacleContact:
     """
 
     def __init__(self, interpolation, weights, obstacles: Sequence, penalty: float,
-                 pose: Callable[[float], Sequence] | None = None) -> None:
+                 pose: Callable[[float], Sequence] | None = None, near_ends: np.ndarray | None = None) -> None:
         self.interpolation = sp.csr_matrix(interpolation)
         self.weights = np.broadcast_to(np.asarray(weights, dtype=float), (self.interpolation.shape[0],)).copy()
         if np.any(self.weights < 0) or not penalty > 0:
@@ -195,17 +220,25 @@ class ObstacleContact:
         self.penalty = float(penalty)
         self.pose = pose
         self.obstacles = tuple(obstacles if pose is None else pose(0.0))
+        # points at the body's attachments: obstacles with ``spares_ends`` (a bone the muscle is
+        # attached to, by its shaped surface) leave them out
+        self.near_ends = None if near_ends is None else np.asarray(near_ends, dtype=bool)
 
     @classmethod
     def at_nodes(cls, mesh: Tet10Mesh, obstacles: Sequence, penalty: float, faces=None, exclude=(),
-                 pose=None) -> ObstacleContact:
+                 pose=None, ends=None, end_distance: float = 0.0) -> ObstacleContact:
         """Every node of the boundary faces (or of ``faces``) except ``exclude`` (e.g. tied end
-        faces), with its tributary area on those faces."""
+        faces), with its tributary area on those faces; nodes within ``end_distance`` of one of
+        ``ends`` ((k, 3) mesh-pose points) are the body's attachments (``near_ends``)."""
         nodes, w = surface_node_weights(mesh, faces=faces)
         keep = ~np.isin(nodes, np.asarray(exclude, dtype=np.int64))
         nodes, w = nodes[keep], w[keep]
         N = sp.csr_matrix((np.ones(len(nodes)), (np.arange(len(nodes)), nodes)), shape=(len(nodes), mesh.n_nodes))
-        return cls(N, w, obstacles, penalty, pose)
+        near = None
+        if ends is not None and end_distance > 0:
+            offsets = mesh.points[nodes][:, None, :] - np.asarray(ends, dtype=float)[None]
+            near = np.min(np.linalg.norm(offsets, axis=2), axis=1) < end_distance
+        return cls(N, w, obstacles, penalty, pose, near)
 
     @classmethod
     def on_faces(cls, mesh: Tet10Mesh, obstacles: Sequence, penalty: float, faces=None, exclude=(),
@@ -235,6 +268,8 @@ class ObstacleContact:
         xp = self.points(x)
         for obstacle in self.obstacles:
             g, n, dn_dx = obstacle.project(xp)
+            if self.near_ends is not None and getattr(obstacle, "spares_ends", False):
+                g = np.where(self.near_ends, np.minimum(g, 0.0), g)
             yield obstacle, g > 0.0, g, n, dn_dx
 
     def energy(self, x: np.ndarray) -> float:

@@ -41,6 +41,8 @@ class MusclePath:
     ``geometry(theta) -> (L, dL/dtheta, d2L/dtheta2)`` (mm, per radian); ``insertion(theta)``
     the world insertion point; ``bones(theta)`` the rigid obstacles (world frame) the muscle
     wraps over, with the penalty ``penalty`` (N/mm^3; docs/theory.md, 3.5); none: no contact.
+    Surface points within ``attachment_mm`` of the muscle's two ends do not touch obstacles that
+    spare them (the bones' shaped surfaces: the muscle is attached there).
     ``insertion_tie``: "line" (ball joints on the line of action) or "forearm" (the insertion
     face rigid with the forearm about ``hinge`` = (centre, axis)); persival.model.insertion_ties.
     """
@@ -51,5 +53,6 @@ class MusclePath:
     mesh_angle_deg: float
     bones: Callable[[float], Sequence] | None = None
     penalty: float = 0.0
+    attachment_mm: float = 0.0
     insertion_tie: str = "line"
     hinge: tuple[np.ndarray, np.ndarray] | None = None

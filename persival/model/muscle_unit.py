@@ -39,7 +39,7 @@ import numpy as np
 
 from persival.model.assembly import MaterialField, Tet10Assembler
 from persival.model.constraints import Dirichlet
-from persival.model.contact import ObstacleContact
+from persival.model.contact import Faded, ObstacleContact
 from persival.model.insertion_ties import ForearmTie, LineTie
 from persival.model.mesh import Tet10Mesh
 from persival.model.muscle_state import MusclePath, MuscleState
@@ -77,7 +77,9 @@ class MuscleUnit:
         self.contact = None
         if path.bones is not None and len(path.bones(self.mesh_angle_deg)):
             tied = np.concatenate([self._origin_face.nodes, self._insertion_face.nodes])
-            self.contact = ObstacleContact.at_nodes(mesh, self.obstacles(self.mesh_angle_deg), path.penalty, exclude=tied)
+            ends = [mesh.points[self._origin_face.nodes].mean(axis=0), mesh.points[self._insertion_face.nodes].mean(axis=0)]
+            self.contact = ObstacleContact.at_nodes(mesh, self.obstacles(self.mesh_angle_deg), path.penalty, exclude=tied,
+                                                    ends=ends, end_distance=path.attachment_mm)
         self.solver = QuasiStaticSolver(mesh, material, [self._origin_face, self._insertion_face], options,
                                         assembler=self.assembler, extra_terms=[self.contact] if self.contact else None)
         # solved states: starts for later solves (_from_library, TableSolver.guess)
@@ -146,11 +148,29 @@ class MuscleUnit:
             full = self.material
             self._set_path(self.mesh_angle_deg, self.mesh_angle_deg)
             try:
+                u = self._push_out_of_obstacles(u)
                 u = self._switch_on_prestretch(u, progress)
             finally:
                 self.solver.material = full
             self._rest = self.response(self.mesh_angle_deg, 0.0, u)
         return self._rest
+
+    def _push_out_of_obstacles(self, u: np.ndarray) -> np.ndarray:
+        """Where the mesh pose starts inside a bone (a tendon's approach to its attachment cutting
+        a corner of a shaped bone), contact fades in first, the prestretch off: the muscle is
+        pushed onto the bone's surface before it is prestressed (docs/theory.md, 3.5)."""
+        if self.contact is None or not np.any(self.contact.penetration(self.mesh.points + u) > 0.0):
+            return u
+        obstacles = self.obstacles(self.mesh_angle_deg)
+        self.contact.pose = lambda t: [Faded(obstacle, t) for obstacle in obstacles]
+        self.solver.material = replace(self.material, fibre_prestretch=np.ones_like(self.material.fibre_prestretch))
+        try:
+            return self.solver.solve(0.0, initial_displacement=u).displacement
+        except ConvergenceError as exc:
+            raise ConvergenceError(f"muscle {self.name!r}: its mesh pose cannot be pushed out of the bones it "
+                                   f"starts inside: {exc}") from exc
+        finally:
+            self._set_path(self.mesh_angle_deg, self.mesh_angle_deg)
 
     def _switch_on_prestretch(self, u: np.ndarray, progress=None) -> np.ndarray:
         """Continuation of the fibre prestretch 1 -> lambda_0 at the mesh pose through the shares

@@ -217,7 +217,7 @@ def test_surface_weights_and_rigid_bone_motion():
     assert np.allclose(g, 7.0 - distance, atol=1e-6) and np.allclose(g_moved, g)
 
 
-def wrapped_unit(with_bone: bool, activation_mesh_deg: float = 0.0, tie: str = "line"):
+def wrapped_unit(with_bone: bool, activation_mesh_deg: float = 0.0, tie: str = "line", bone_radius: float = 8.0):
     """The wrapped muscle above as a MuscleUnit: origin fixed, insertion on a forearm turning about
     the x axis (the hinge), the cylinder (R = 8 mm) on that axis as its bone (SPEC 3.3 contact);
     ``tie``: the insertion face's tie (persival.model.insertion_ties)."""
@@ -239,7 +239,7 @@ def wrapped_unit(with_bone: bool, activation_mesh_deg: float = 0.0, tie: str = "
         dL = e @ v1
         return L, dL, (v1 @ v1 - dL**2) / L + e @ np.cross(axis, v1)
 
-    bone = Capsule([-30.0, 0.0, 0.0], [30.0, 0.0, 0.0], R, "trochlea")
+    bone = Capsule([-30.0, 0.0, 0.0], [30.0, 0.0, 0.0], bone_radius, "trochlea")
     path = MusclePath(ends["origin"], insertion, geometry, activation_mesh_deg,
                       bones=(lambda theta: [bone]) if with_bone else None, penalty=5.0,
                       insertion_tie=tie, hinge=(np.zeros(3), axis))
@@ -281,6 +281,17 @@ def test_muscle_unit_moment_with_contact_is_the_work_on_its_faces(capsys):
     assert state.moment == pytest.approx(moment, rel=1e-4)
     assert state.moment_slope == pytest.approx(slope, rel=2e-3)
     assert np.abs(state.sensitivity - du).max() < 2e-3 * np.abs(du).max()
+
+
+def test_a_mesh_pose_inside_its_bone_is_pushed_onto_the_surface_before_the_prestretch():
+    """Meshed 1.7 mm into its bone (the capsule 10 mm round the hinge, the muscle's deep side at
+    8.3 mm), the rest state fades contact in first: the muscle ends on the bone's surface, within
+    the penalty's give (contact pressure / eps), not inside it."""
+    unit, _ = wrapped_unit(True, bone_radius=10.0)
+    start = unit.contact.penetration(unit.mesh.points).max()
+    rest = unit.rest_state()
+    assert start == pytest.approx(1.7, abs=0.05)
+    assert rest.max_penetration < 0.3 and rest.contact_force > 0.5
 
 
 @pytest.mark.slow

@@ -1,0 +1,107 @@
+"""A shaped bone as a contact obstacle: the sampled distance field against an exact sphere."""
+
+import numpy as np
+import pytest
+import pyvista as pv
+
+from persival.model.bone_fields import sampled_field
+from persival.model.rotations import rotation_about
+
+RADIUS = 12.0
+
+
+@pytest.fixture(scope="module")
+def sphere_field():
+    surface = pv.Sphere(radius=RADIUS, theta_resolution=120, phi_resolution=120).triangulate()
+    triangles = surface.faces.reshape(-1, 4)[:, 1:]
+    return sampled_field(np.asarray(surface.points, dtype=float), triangles, "ball", spacing=1.0)
+
+
+def _points_near_surface(count: int, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    directions = rng.normal(size=(count, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    return directions * rng.uniform(RADIUS - 3.0, RADIUS + 3.0, size=(count, 1))
+
+
+def test_the_penetration_and_normal_are_a_spheres_within_a_tenth_of_a_millimetre(sphere_field):
+    x = _points_near_surface(400)
+    g, n, _ = sphere_field.project(x)
+    d = np.linalg.norm(x, axis=1)
+    # the triangulated sphere lies inside the exact one by at most R (1 - cos(pi/120)) = 4e-3 mm
+    assert np.max(np.abs(g - (RADIUS - d))) < 0.1
+    assert np.max(np.linalg.norm(n - x / d[:, None], axis=1)) < 0.02
+
+
+def test_normal_and_its_gradient_are_the_exact_derivatives_of_the_penetration(sphere_field):
+    x = _points_near_surface(50, seed=1)
+    g, n, dn_dx = sphere_field.project(x)
+    h = 1e-5
+    for axis in range(3):
+        step = np.zeros(3)
+        step[axis] = h
+        g_plus, n_plus, _ = sphere_field.project(x + step)
+        g_minus, n_minus, _ = sphere_field.project(x - step)
+        np.testing.assert_allclose(-(g_plus - g_minus) / (2 * h), n[:, axis], atol=1e-6)
+        np.testing.assert_allclose((n_plus - n_minus) / (2 * h), dn_dx(np.ones(len(x), bool))[:, :, axis], atol=1e-5)
+
+
+def test_a_turned_and_moved_field_is_the_bone_turned_and_moved(sphere_field):
+    Q = rotation_about(np.array([1.0, 0.0, 0.0]), 70.0)
+    centre = np.array([0.0, 0.0, -40.0])
+    moved = sphere_field.transformed(Q, centre)
+    ball_centre = centre + Q @ (np.zeros(3) - centre)
+    x = ball_centre + _points_near_surface(100, seed=2)
+    g, n, _ = moved.project(x)
+    g0, n0, _ = sphere_field.project(x - ball_centre)
+    np.testing.assert_allclose(g, g0, atol=0.05)  # the grid turned: other samples, same sphere
+    np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=0.02)
+    d = x - ball_centre
+    np.testing.assert_allclose(n, d / np.linalg.norm(d, axis=1, keepdims=True), atol=0.02)
+
+
+def test_points_off_the_grid_are_not_in_contact(sphere_field):
+    g, n, dn_dx = sphere_field.project(np.array([[0.0, 0.0, 60.0], [200.0, 0.0, 0.0]]))
+    assert np.all(g < 0) and np.all(n == 0.0)
+
+
+def _block_on_ball(field, ends=None, end_distance=0.0):
+    """A 10 mm block whose lower face dips into the ball's top, its contact at the surface nodes."""
+    from persival.model.contact import ObstacleContact
+    from persival.model.geometry import box_mesh
+
+    mesh = box_mesh((2, 2, 2), (10.0, 10.0, 10.0))
+    x = mesh.points + [-5.0, -5.0, RADIUS - 1.5]
+    contact = ObstacleContact.at_nodes(mesh, [field], 1.0, ends=ends, end_distance=end_distance)
+    return contact, x
+
+
+def test_contact_with_a_field_has_the_exact_tangent(sphere_field):
+    from contact_differences import differences
+
+    contact, x = _block_on_ball(sphere_field)
+    assert contact.penetration(x).max() == pytest.approx(1.5, abs=0.05)
+    asymmetry, tangent_error, force_error = differences(contact, x)
+    assert asymmetry < 1e-12 and tangent_error < 1e-5 and force_error < 1e-5
+
+
+def test_a_faded_field_scales_the_energy_by_its_share_squared(sphere_field):
+    from persival.model.contact import Faded
+
+    contact, x = _block_on_ball(sphere_field)
+    full = contact.energy(x)
+    contact.obstacles = (Faded(sphere_field, 0.5),)
+    assert contact.energy(x) == pytest.approx(0.25 * full, rel=1e-12)
+
+
+def test_a_muscles_attachment_does_not_touch_the_bone_it_is_attached_to(sphere_field):
+    from dataclasses import replace
+
+    contact, x = _block_on_ball(sphere_field, ends=[[0.0, 0.0, 0.0]], end_distance=4.0)  # mesh-pose corner
+    spared = contact.near_ends
+    assert 0 < spared.sum() < len(spared)
+    g_spared = contact.penetration(x)
+    contact.obstacles = (replace(sphere_field, spares_ends=False),)
+    g_all = contact.penetration(x)
+    assert np.all(g_spared[spared] == 0.0) and g_all[spared].max() > 0.5
+    np.testing.assert_array_equal(g_spared[~spared], g_all[~spared])
