@@ -14,7 +14,7 @@ RADIUS = 12.0
 def sphere_field():
     surface = pv.Sphere(radius=RADIUS, theta_resolution=120, phi_resolution=120).triangulate()
     triangles = surface.faces.reshape(-1, 4)[:, 1:]
-    return sampled_field(np.asarray(surface.points, dtype=float), triangles, "ball", spacing=1.0)
+    return sampled_field(np.asarray(surface.points, dtype=float), triangles, "ball", spacing=1.0, smoothing=0.0)
 
 
 def _points_near_surface(count: int, seed: int = 0) -> np.ndarray:
@@ -31,6 +31,17 @@ def test_the_penetration_and_normal_are_a_spheres_within_a_tenth_of_a_millimetre
     # the triangulated sphere lies inside the exact one by at most R (1 - cos(pi/120)) = 4e-3 mm
     assert np.max(np.abs(g - (RADIUS - d))) < 0.1
     assert np.max(np.linalg.norm(n - x / d[:, None], axis=1)) < 0.02
+
+
+def test_the_blur_moves_a_convex_surface_in_by_sigma_squared_over_its_radius():
+    surface = pv.Sphere(radius=RADIUS, theta_resolution=120, phi_resolution=120).triangulate()
+    blurred = sampled_field(np.asarray(surface.points, dtype=float), surface.faces.reshape(-1, 4)[:, 1:], "ball",
+                            spacing=1.0, smoothing=2.0)
+    g, _, _ = blurred.project(_points_near_surface(200, seed=3))
+    x = _points_near_surface(200, seed=3)
+    shift = (RADIUS - np.linalg.norm(x, axis=1)) - g
+    # the mean of |x + xi| over a Gaussian xi of width sigma in 3-D is r + sigma^2 / r for r >> sigma
+    np.testing.assert_allclose(shift, 2.0**2 / np.linalg.norm(x, axis=1), atol=0.03)
 
 
 def test_normal_and_its_gradient_are_the_exact_derivatives_of_the_penetration(sphere_field):
