@@ -13,11 +13,7 @@ derivatives of the interpolant. With g = -phi,
     n = -dg/dx = grad phi,   dn/dx = Hess phi,
 
 so the contact tangent is the exact Hessian of the penalty energy even where |grad phi| departs
-from 1 between samples. The samples are blurred by a Gaussian of 2 mm first: the radial head's
-rim and the ridges are drawn with 1.5 mm fillets, sharper than a muscle mesh of 5 to 12 mm can
-follow, and a node sliding over such a rim meets curvatures of 1/1.5 mm in the tangent. A convex
-surface of radius R moves in by about sigma^2 / R under the blur (0.3 mm on a 12 mm sphere).
-Building the grid costs ~15 s per model (three bones, 1.5 mm), then it
+from 1 between samples. Building the grid costs ~15 s per model (three bones, 1.5 mm), then it
 sits in the cache folder next to the bones' surfaces.
 """
 
@@ -35,9 +31,8 @@ from persival.model.state_cache import cache_root
 
 __all__ = ["DistanceField", "bone_fields"]
 
-FIELDS_VERSION = 2  # bump when the sampling below changes: the cached grids are rebuilt
+FIELDS_VERSION = 3  # bump when the sampling below changes: the cached grids are rebuilt
 GRID_MM = 1.5
-SMOOTHING_MM = 2.0  # Gaussian width: rims sharper than the muscles' mesh can follow are rounded
 PAD_MM = 8.0  # the grid reaches this far beyond the bone's surface (contact happens within it)
 
 
@@ -127,11 +122,10 @@ class DistanceField:
 
 
 def sampled_field(points: np.ndarray, triangles: np.ndarray, name: str, spacing: float = GRID_MM,
-                  pad: float = PAD_MM, smoothing: float = SMOOTHING_MM) -> DistanceField:
-    """The distance field of a closed triangle surface (points in the bone frame), blurred by a
-    Gaussian of width ``smoothing`` (mm; module docstring)."""
+                  pad: float = PAD_MM) -> DistanceField:
+    """The distance field of a closed triangle surface (points in the bone frame)."""
     import pyvista as pv
-    from scipy.ndimage import gaussian_filter, spline_filter
+    from scipy.ndimage import spline_filter
 
     from persival.model.anatomy_check import _oriented_polydata
 
@@ -141,8 +135,6 @@ def sampled_field(points: np.ndarray, triangles: np.ndarray, name: str, spacing:
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     probe = pv.PolyData(grid).compute_implicit_distance(_oriented_polydata(points, triangles))
     phi = np.asarray(probe.point_data["implicit_distance"], dtype=float).reshape(*counts)
-    if smoothing > 0:
-        phi = gaussian_filter(phi, smoothing / spacing, mode="nearest")
     coefficients = spline_filter(phi, order=3, mode="mirror")
     return DistanceField(coefficients, lower, float(spacing), name)
 
