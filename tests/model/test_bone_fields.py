@@ -126,3 +126,29 @@ def test_a_forearm_bone_turns_with_the_elbow_by_its_shaped_surface():
     print(np.quantile(np.abs(g), [0.5, 0.95, 1.0]), np.quantile(np.linalg.norm(n, axis=1), [0.05, 0.5, 0.95]))
     assert np.quantile(np.abs(g), 0.95) < 0.1 and np.abs(g).max() < 0.3
     assert np.median(np.linalg.norm(n, axis=1)) == pytest.approx(1.0, abs=0.05)
+
+
+@pytest.mark.slow
+def test_a_model_with_bone_surfaces_gives_its_muscles_the_shaped_bones(tmp_path):
+    """`[contact] bone_surfaces = true`: the bones a muscle wraps reach it as distance fields (its
+    walls stay planes), with its attachments spared; without it, as capsules."""
+    from persival.model.arm import ArmModel
+    from persival.model.arm_body import ArmBody
+    from persival.model.bone_fields import DistanceField
+    from persival.model.contact import Capsule
+    from persival.model.defaults import default_model_path
+
+    text = (default_model_path().parent / "variants" / "atlas_walls.toml").read_text()
+    shaped = tmp_path / "shaped.toml"
+    shaped.write_text(text.replace("[joint]", "[contact]\nbone_surfaces = true\n\n[joint]", 1))
+    kinds = {}
+    for path in (default_model_path().parent / "variants" / "atlas_walls.toml", shaped):
+        frame = ArmBody.frame(path, "coarse")
+        muscle = frame.spec.muscle("brachialis")
+        obstacles = ArmModel._bones_of(frame, muscle, frame.centre_line(muscle))(30.0)
+        kinds[path.name] = {type(o).__name__ for o in obstacles}
+        if path == shaped:
+            (humerus,) = [o for o in obstacles if isinstance(o, DistanceField)]
+            assert humerus.name == "humerus" and humerus.spares_ends
+            assert frame.spec.contact.attachment_mm == 10.0
+    assert kinds == {"atlas_walls.toml": {Capsule.__name__, "Septum"}, "shaped.toml": {"DistanceField", "Septum"}}
