@@ -23,10 +23,10 @@ from persival.model.arm_file import Muscle
 from persival.model.arm_state import ArmState
 from persival.model.assembly import MaterialField
 from persival.model.bone_fields import bone_fields
-from persival.model.contact import bone_obstacles
 from persival.model.mesh import Tet10Mesh
 from persival.model.muscle_state import MusclePath, MuscleState
 from persival.model.muscle_unit import MuscleUnit
+from persival.model.obstacles import bone_obstacles
 from persival.model.progress import SolveTracker
 from persival.model.solver import ConvergenceError, SolverOptions
 from persival.model.walls import septum_sides, wall_obstacles

@@ -100,7 +100,7 @@ class DistanceField:
 
     def project(self, x: np.ndarray):
         """Penetration g = -phi (n,), n = -dg/dx = grad phi (n, 3) and ``dn_dx(mask)`` = Hess phi
-        (k, 3, 3), in the frame of x (as the capsules of persival.model.contact)."""
+        (k, 3, 3), in the frame of x (as the capsules of persival.model.obstacles)."""
         R = self.rotation
         phi, grad, hess = self.evaluate((np.asarray(x, dtype=float) - self.offset) @ R)
         n = grad @ R.T

@@ -1,10 +1,9 @@
-"""Muscle-bone contact: rigid analytic obstacles, frictionless normal penalty contact (docs/theory.md, 3.5).
+"""Muscle-bone contact: frictionless normal penalty contact with rigid obstacles (docs/theory.md, 3.5).
 
-A bone is a rigid obstacle described by its surface's closest-point projection: a capsule
-(a segment with a radius: the model file's ``[[bones]]`` entries) or a half-space (verification).
-For a body point at current position x it gives the penetration depth
-``g(x) = r - dist(x, axis segment)`` (capsule), the outward unit normal n at the closest
-surface point and the normal's gradient ``dn/dx``. Contact adds the penalty energy
+The obstacles (persival.model.obstacles: capsules, half-spaces; the bones' shaped surfaces in
+persival.model.bone_fields; the fascial walls in persival.model.walls) give, for a body point at
+current position x, the penetration g(x), the outward normal n = -dg/dx and its gradient
+``dn/dx``. Contact adds the penalty energy
 
     Pi_c = sum_p 0.5 eps w_p <g_p>^2,    <g> = max(0, g)        (docs/theory.md, 3.5)
 
@@ -16,9 +15,7 @@ With ``dg/dx = -n``:
     force     f_p = dPi_c/dx_p = -eps w_p g_p n_p                (residual contribution)
     tangent   K_p = df_p/dx_p  = eps w_p (n n^T - g dn/dx)
 
-and for a capsule ``dn/dx = (I - n n^T - t t^T) / d`` where the closest point lies inside the
-segment (t: unit axis; the point slides along the axis), ``(I - n n^T) / d`` on the spherical
-caps (the closest point is a fixed end), d = r - g the distance to the axis. The curvature term
+with dn/dx from the obstacle (for a capsule ``(I - n n^T - t t^T) / d``). The curvature term
 ``-eps w g dn/dx`` (the normal turns as the point slides over the curved surface) makes the
 tangent the exact Hessian of Pi_c, so Newton stays quadratic once the active set (the points
 with g > 0) settles. The tangent couples only nodes of one boundary face (one 3x3 block per
@@ -31,137 +28,14 @@ do not touch each other.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
 from persival.model.mesh import Tet10Mesh
-from persival.model.rotations import rotation_about
 
 # the four 3-node sub-triangles of a 6-node face (corners 0-2, mid-sides 3 = (0,1), 4 = (1,2), 5 = (2,0))
 _SUB_TRIANGLES = np.array([[0, 3, 5], [1, 4, 3], [2, 5, 4], [3, 4, 5]])
-
-
-def _as_vector(v) -> np.ndarray:
-    v = np.asarray(v, dtype=float).reshape(3)
-    if not np.all(np.isfinite(v)):
-        raise ValueError("obstacle coordinates must be finite")
-    return v
-
-
-@dataclass(frozen=True)
-class Capsule:
-    """All points within ``radius`` of the segment start-end (a bone's shaft with rounded ends)."""
-
-    start: np.ndarray
-    end: np.ndarray
-    radius: float
-    name: str = "capsule"
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "start", _as_vector(self.start))
-        object.__setattr__(self, "end", _as_vector(self.end))
-        if not self.radius > 0:
-            raise ValueError(f"obstacle {self.name!r}: radius must be positive")
-
-    @classmethod
-    def from_bone(cls, bone) -> Capsule:
-        """From a model-file bone entry (anything with start, end, radius and name)."""
-        return cls(bone.start, bone.end, float(bone.radius), bone.name)
-
-    def project(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, Callable[[np.ndarray], np.ndarray]]:
-        """Penetration g (n,), outward normal n (n, 3) and ``dn_dx(mask) -> (k, 3, 3)`` (docs/theory.md, 3.5)."""
-        axis = self.end - self.start
-        length = float(np.linalg.norm(axis))
-        t = axis / length if length > 0 else np.zeros(3)
-        s = (x - self.start) @ t
-        inside = (s > 0.0) & (s < length)  # closest point slides along the axis (else: a fixed end)
-        v = x - (self.start + np.clip(s, 0.0, length)[:, None] * t)
-        d = np.linalg.norm(v, axis=1)
-        # a node exactly on the axis has no normal: it gets none (zero force), a degenerate case
-        d_safe = np.where(d > 0.0, d, np.inf)
-        n = v / d_safe[:, None]
-
-        def dn_dx(mask: np.ndarray) -> np.ndarray:
-            nm = n[mask]
-            P = np.eye(3) - nm[:, :, None] * nm[:, None, :]
-            P -= inside[mask][:, None, None] * np.outer(t, t)[None]
-            return P / d_safe[mask][:, None, None]
-
-        return self.radius - d, n, dn_dx
-
-    def transformed(self, rotation: np.ndarray, centre) -> Capsule:
-        """The capsule moved rigidly: p -> centre + rotation (p - centre)."""
-        c, R = _as_vector(centre), np.asarray(rotation, dtype=float)
-        return Capsule(c + R @ (self.start - c), c + R @ (self.end - c), self.radius, self.name)
-
-    def rotated(self, axis, centre, theta_deg: float) -> Capsule:
-        """Turned by theta about an axis through centre (a forearm bone at elbow angle theta)."""
-        return self.transformed(rotation_about(axis, theta_deg), centre)
-
-
-@dataclass(frozen=True)
-class HalfSpace:
-    """The rigid half-space behind the plane through ``point`` with outward unit ``normal``."""
-
-    point: np.ndarray
-    normal: np.ndarray
-    name: str = "half-space"
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "point", _as_vector(self.point))
-        n = _as_vector(self.normal)
-        if np.linalg.norm(n) == 0:
-            raise ValueError(f"obstacle {self.name!r}: normal must be non-zero")
-        object.__setattr__(self, "normal", n / np.linalg.norm(n))
-
-    def project(self, x: np.ndarray):
-        """As :meth:`Capsule.project`; a plane's normal does not turn (dn/dx = 0)."""
-        g = (self.point - x) @ self.normal
-        return g, np.broadcast_to(self.normal, x.shape), lambda mask: np.zeros((int(np.count_nonzero(mask)), 3, 3))
-
-    def transformed(self, rotation: np.ndarray, centre) -> HalfSpace:
-        c, R = _as_vector(centre), np.asarray(rotation, dtype=float)
-        return HalfSpace(c + R @ (self.point - c), R @ self.normal, self.name)
-
-    def rotated(self, axis, centre, theta_deg: float) -> HalfSpace:
-        return self.transformed(rotation_about(axis, theta_deg), centre)
-
-
-@dataclass(frozen=True)
-class Faded:
-    """An obstacle whose penetration is scaled by ``share`` in [0, 1], so its penalty energy by
-    share^2: contact switched on gradually where a mesh starts inside a bone (force and tangent
-    stay the exact derivatives of that energy)."""
-
-    obstacle: object
-    share: float
-
-    @property
-    def name(self) -> str:
-        return self.obstacle.name
-
-    @property
-    def spares_ends(self) -> bool:
-        return getattr(self.obstacle, "spares_ends", False)
-
-    def project(self, x: np.ndarray):
-        g, n, dn_dx = self.obstacle.project(x)
-        s = self.share
-        return s * g, s * n, (lambda mask: s * dn_dx(mask))
-
-
-def bone_obstacles(bones, centre, axis, theta_deg: float, fields: dict | None = None) -> list:
-    """Obstacles of model-file bones at elbow angle theta: their shaped surfaces where ``fields``
-    (name -> persival.model.bone_fields.DistanceField) has them, else their capsules;
-    ``forearm`` bones (given at theta = 0) turn about the hinge, ``upper_arm`` bones stay
-    (docs/theory.md, 3.5)."""
-    out = []
-    for bone in bones:
-        obstacle = (fields or {}).get(bone.name) or Capsule.from_bone(bone)
-        out.append(obstacle.rotated(axis, centre, theta_deg) if bone.segment == "forearm" else obstacle)
-    return out
 
 
 def surface_node_weights(mesh: Tet10Mesh, points: np.ndarray | None = None,
@@ -317,7 +191,7 @@ class ObstacleContact:
         The body pushes an obstacle with ``-eps w g n`` per point (docs/theory.md, 3.5): a bone on
         the forearm passes this moment on to the elbow's balance.
         """
-        xp, c, out = self.points(x), _as_vector(centre), {}
+        xp, c, out = self.points(x), np.asarray(centre, dtype=float).reshape(3), {}
         for obstacle, a, g, n, _ in self._pairs(x):
             push = -(self.penalty * self.weights[a] * g[a])[:, None] * n[a]
             force, moment = out.get(obstacle.name, (np.zeros(3), np.zeros(3)))

@@ -39,10 +39,11 @@ import numpy as np
 
 from persival.model.assembly import MaterialField, Tet10Assembler
 from persival.model.constraints import Dirichlet
-from persival.model.contact import Faded, ObstacleContact
+from persival.model.contact import ObstacleContact
 from persival.model.insertion_ties import ForearmTie, LineTie
 from persival.model.mesh import Tet10Mesh
 from persival.model.muscle_state import MusclePath, MuscleState
+from persival.model.obstacles import Faded
 from persival.model.solver import ConvergenceError, QuasiStaticSolver, SolverOptions
 from persival.model.state_library import StateLibrary
 

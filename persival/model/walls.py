@@ -3,7 +3,7 @@
 The arm's muscles lie in compartments bounded by the deep fascia and the intermuscular septa,
 which are tied to the bones. Here a wall is a rigid analytic surface that moves with its bone's
 segment, with the same frictionless penalty contact and the same interface as the bones'
-capsules (:mod:`persival.model.contact`: penetration g, ``n = -dg/dx`` and ``dn/dx``), so each
+capsules (:mod:`persival.model.obstacles`: penetration g, ``n = -dg/dx`` and ``dn/dx``), so each
 muscle still depends on its own activation and the elbow angle only:
 
 * :class:`Septum`: a plane, active over a band of heights (a window w(s) along a direction,
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from persival.model.contact import Capsule, _as_vector
+from persival.model.obstacles import Capsule, _as_vector
 from persival.model.rotations import rotation_about
 
 __all__ = ["Septum", "Sleeve", "wall_obstacles"]

@@ -86,7 +86,7 @@ def test_contact_with_a_field_has_the_exact_tangent(sphere_field):
 
 
 def test_a_faded_field_scales_the_energy_by_its_share_squared(sphere_field):
-    from persival.model.contact import Faded
+    from persival.model.obstacles import Faded
 
     contact, x = _block_on_ball(sphere_field)
     full = contact.energy(x)
@@ -112,8 +112,8 @@ def test_a_forearm_bone_turns_with_the_elbow_by_its_shaped_surface():
     shaped surface, turned about the hinge, is the field's zero level."""
     from persival.model.arm_file import load_model_file
     from persival.model.bone_shapes import bone_shapes
-    from persival.model.contact import bone_obstacles
     from persival.model.defaults import default_model_path
+    from persival.model.obstacles import bone_obstacles
 
     spec, _ = load_model_file(default_model_path().parent / "variants" / "atlas_walls.toml")
     points, triangles = bone_shapes(spec)["radius"]
@@ -135,8 +135,8 @@ def test_a_model_with_bone_surfaces_gives_its_muscles_the_shaped_bones(tmp_path)
     from persival.model.arm import ArmModel
     from persival.model.arm_body import ArmBody
     from persival.model.bone_fields import DistanceField
-    from persival.model.contact import Capsule
     from persival.model.defaults import default_model_path
+    from persival.model.obstacles import Capsule
 
     text = (default_model_path().parent / "variants" / "atlas_walls.toml").read_text()
     shaped = tmp_path / "shaped.toml"

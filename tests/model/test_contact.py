@@ -11,8 +11,9 @@ from persival.model.arm import muscle_profile, rotation_about
 from persival.model.arm_file import Bone, Muscle
 from persival.model.assembly import MaterialField
 from persival.model.constraints import Dirichlet
-from persival.model.contact import Capsule, HalfSpace, ObstacleContact, bone_obstacles, surface_node_weights
+from persival.model.contact import ObstacleContact, surface_node_weights
 from persival.model.geometry import box_mesh, swept_solid_mesh
+from persival.model.obstacles import Capsule, HalfSpace, bone_obstacles
 from persival.model.solver import QuasiStaticSolver, SolverOptions
 
 

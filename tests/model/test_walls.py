@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 from contact_differences import differences
 
-from persival.model.contact import Capsule, ObstacleContact
+from persival.model.contact import ObstacleContact
 from persival.model.geometry import box_mesh
+from persival.model.obstacles import Capsule
 from persival.model.walls import Septum, Sleeve, septum_sides, wall_obstacles
 
 
