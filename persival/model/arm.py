@@ -71,7 +71,7 @@ class ArmModel(ArmStateCache, ArmBody):
             mesh_angle_deg=muscle.mesh_angle_deg,
             bones=self._bones_of(muscle, mesh.points) if muscle.wraps else None,
             penalty=self.spec.contact.penalty,
-            attachment_mm=self.spec.contact.attachment_mm if self.spec.contact.bone_surfaces else 0.0,
+            attachment_mm=self.spec.contact.attachment_mm,
             insertion_tie=muscle.insertion_tie,
             hinge=(self.centre, self.axis),
         )

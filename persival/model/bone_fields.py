@@ -19,15 +19,11 @@ sits in the cache folder next to the bones' surfaces.
 
 from __future__ import annotations
 
-import hashlib
-import json
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from persival.model.rotations import rotation_about
-from persival.model.state_cache import cache_root
 
 __all__ = ["DistanceField", "bone_fields"]
 
@@ -65,50 +61,47 @@ class DistanceField:
     offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
     spares_ends: bool = True
 
-    def evaluate(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """phi (k,), grad (k, 3) and Hessian (k, 3, 3) at bone-frame points y (k, 3); +inf and
-        zeros outside the grid's interior."""
+    def evaluate(self, y: np.ndarray, order: int = 2) -> tuple[np.ndarray, ...]:
+        """phi (k,), grad (k, 3) and, for ``order`` 2, the Hessian (k, 3, 3) at bone-frame points y
+        (k, 3); +inf and zeros outside the grid's interior."""
         u = (np.asarray(y, dtype=float) - self.lower) / self.spacing
         base = np.floor(u).astype(np.int64) - 1
-        shape = np.array(self.coefficients.shape)
-        inside = np.all((base >= 0) & (base + 3 < shape), axis=1)
+        inside = np.all((base >= 0) & (base + 3 < np.array(self.coefficients.shape)), axis=1)
         k = len(u)
         phi, grad, hess = np.full(k, np.inf), np.zeros((k, 3)), np.zeros((k, 3, 3))
-        if not inside.any():
-            return phi, grad, hess
-        b, t = base[inside], u[inside] - np.floor(u[inside])
-        offsets = np.arange(4)
-        ix = (b[:, 0, None] + offsets)[:, :, None, None]
-        iy = (b[:, 1, None] + offsets)[:, None, :, None]
-        iz = (b[:, 2, None] + offsets)[:, None, None, :]
-        c = self.coefficients[ix, iy, iz]  # (m, 4, 4, 4)
-        w = [_cubic_weights(t[:, axis]) for axis in range(3)]  # per axis: (value, d, d2) weights
+        if inside.any():
+            b, t = base[inside], u[inside] - np.floor(u[inside])
+            offsets = np.arange(4)
+            c = self.coefficients[(b[:, 0, None] + offsets)[:, :, None, None], (b[:, 1, None] + offsets)[:, None, :, None],
+                                  (b[:, 2, None] + offsets)[:, None, None, :]]  # (m, 4, 4, 4)
+            w = [_cubic_weights(t[:, axis]) for axis in range(3)]  # per axis: (value, d, d2) weights
 
-        def contract(ox: int, oy: int, oz: int) -> np.ndarray:
-            return np.einsum("mabc,ma,mb,mc->m", c, w[0][ox], w[1][oy], w[2][oz])
+            def contract(orders) -> np.ndarray:
+                return np.einsum("mabc,ma,mb,mc->m", c, w[0][orders[0]], w[1][orders[1]], w[2][orders[2]], optimize=True)
 
-        h = self.spacing
-        phi[inside] = contract(0, 0, 0)
-        orders = np.eye(3, dtype=int)
-        grad[inside] = np.stack([contract(*o) for o in orders], axis=1) / h
-        hm = np.empty((len(b), 3, 3))
-        for i in range(3):
-            for j in range(i, 3):
-                hm[:, i, j] = hm[:, j, i] = contract(*(orders[i] + orders[j])) / h**2
-        hess[inside] = hm
-        return phi, grad, hess
+            h, unit = self.spacing, np.eye(3, dtype=int)
+            phi[inside] = contract((0, 0, 0))
+            grad[inside] = np.stack([contract(o) for o in unit], axis=1) / h
+            if order == 2:
+                hm = np.empty((len(b), 3, 3))
+                for i in range(3):
+                    for j in range(i, 3):
+                        hm[:, i, j] = hm[:, j, i] = contract(unit[i] + unit[j]) / h**2
+                hess[inside] = hm
+        return (phi, grad, hess) if order == 2 else (phi, grad)
 
     def project(self, x: np.ndarray):
         """Penetration g = -phi (n,), n = -dg/dx = grad phi (n, 3) and ``dn_dx(mask)`` = Hess phi
-        (k, 3, 3), in the frame of x (as the capsules of persival.model.obstacles)."""
+        (k, 3, 3), in the frame of x (as the capsules of persival.model.obstacles). The Hessian is
+        evaluated only where asked for: the active points, a few of the surface's."""
         R = self.rotation
-        phi, grad, hess = self.evaluate((np.asarray(x, dtype=float) - self.offset) @ R)
-        n = grad @ R.T
+        y = (np.asarray(x, dtype=float) - self.offset) @ R
+        phi, grad = self.evaluate(y, order=1)
 
         def dn_dx(mask: np.ndarray) -> np.ndarray:
-            return np.einsum("ij,mjk,lk->mil", R, hess[mask], R)
+            return np.einsum("ij,mjk,lk->mil", R, self.evaluate(y[mask])[2], R)
 
-        return -phi, n, dn_dx
+        return -phi, grad @ R.T, dn_dx
 
     def transformed(self, rotation: np.ndarray, centre) -> DistanceField:
         """The bone moved rigidly: p -> centre + rotation (p - centre)."""
@@ -139,35 +132,22 @@ def sampled_field(points: np.ndarray, triangles: np.ndarray, name: str, spacing:
     return DistanceField(coefficients, lower, float(spacing), name)
 
 
-def bone_fields(spec, progress=None) -> dict[str, DistanceField]:
+def bone_fields(spec) -> dict[str, DistanceField]:
     """Every bone of a model with a drawn shape (not a plain tube) as a :class:`DistanceField`
     in arm coordinates, forearm bones at theta = 0. Built once per model and kept in the cache
-    folder, keyed like the bones' surfaces."""
-    from persival.model.bone_shapes import SHAPES_VERSION, bone_shapes
+    folder next to the bones' surfaces (persival.model.bone_shapes.cached_bone_arrays)."""
+    from persival.model.bone_shapes import SHAPES_VERSION, bone_shapes, cached_bone_arrays
 
-    shaped = [b for b in spec.bones if b.drawn_shape().kind != "tube"]
+    shaped = [b.name for b in spec.bones if b.drawn_shape().kind != "tube"]
     if not shaped:
         return {}
-    key_text = json.dumps({"version": [SHAPES_VERSION, FIELDS_VERSION, GRID_MM, PAD_MM],
-                           "joint": spec.joint.model_dump(), "bones": [b.model_dump() for b in spec.bones]},
-                          sort_keys=True)
-    key = hashlib.sha256(key_text.encode()).hexdigest()[:16]
-    path = cache_root() / "bones" / f"{spec.name}-{key}-fields.npz"
-    if path.is_file():
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                return {b.name: DistanceField(data[f"{b.name}/coefficients"], data[f"{b.name}/lower"],
-                                              float(data[f"{b.name}/spacing"]), b.name) for b in shaped}
-        except (OSError, ValueError, KeyError):
-            pass  # unreadable: built again and overwritten
-    if progress is not None:
-        progress(f"sampling the distance fields of {', '.join(b.name for b in shaped)} (once per model)")
-    surfaces = bone_shapes(spec)
-    fields = {b.name: sampled_field(*surfaces[b.name], b.name) for b in shaped}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.writing.npz")
-    np.savez(tmp, **{f"{name}/{part}": value for name, f in fields.items()
-                     for part, value in (("coefficients", f.coefficients), ("lower", f.lower),
-                                         ("spacing", np.array(f.spacing)))})
-    os.replace(tmp, path)
-    return fields
+
+    def build() -> dict[str, np.ndarray]:
+        surfaces = bone_shapes(spec)
+        fields = [sampled_field(*surfaces[name], name) for name in shaped]
+        return {f"{f.name}/{part}": np.asarray(value) for f in fields
+                for part, value in (("coefficients", f.coefficients), ("lower", f.lower), ("spacing", f.spacing))}
+
+    data = cached_bone_arrays(spec, "-fields", [SHAPES_VERSION, FIELDS_VERSION, GRID_MM, PAD_MM], build)
+    return {name: DistanceField(data[f"{name}/coefficients"], data[f"{name}/lower"], float(data[f"{name}/spacing"]), name)
+            for name in shaped}

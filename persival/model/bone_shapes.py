@@ -43,7 +43,7 @@ from persival.model.implicit_solids import (
 from persival.model.rotations import rotation_about
 from persival.model.state_cache import cache_root
 
-__all__ = ["ElbowFrame", "articular_layout", "bone_shapes", "tube_surface"]
+__all__ = ["ElbowFrame", "articular_layout", "bone_shapes", "cached_bone_arrays", "tube_surface"]
 
 SHAPES_VERSION = 1  # bump when the shapes below change: the cached surfaces are rebuilt
 SPACING_MM = 1.0  # marching-cubes grid
@@ -296,26 +296,39 @@ def _shapes(spec_json: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     return out
 
 
-def bone_shapes(spec) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Every bone of a model as (points (n, 3), triangles (k, 3)) in arm coordinates, forearm
-    bones at theta = 0 (turn them with the forearm). Built once per model (a few seconds) and
-    kept in the cache folder, keyed by the joint, the bones and this module's version."""
+def cached_bone_arrays(spec, tag: str, versions, build) -> dict[str, np.ndarray]:
+    """Arrays derived from a model's bones, built once by ``build() -> {name: array}`` and kept in
+    the cache folder as ``{model}-{key}{tag}.npz``, keyed by the joint, the bones, VTK's version
+    and ``versions`` (those of the code that builds them); an unreadable file is built again."""
     from vtkmodules.vtkCommonCore import vtkVersion
 
-    key_text = json.dumps({"version": SHAPES_VERSION, "vtk": vtkVersion.GetVTKVersion(),
+    key_text = json.dumps({"version": versions, "vtk": vtkVersion.GetVTKVersion(),
                            "joint": spec.joint.model_dump(), "bones": [b.model_dump() for b in spec.bones]},
                           sort_keys=True)
     key = hashlib.sha256(key_text.encode()).hexdigest()[:16]
-    path = cache_root() / "bones" / f"{spec.name}-{key}.npz"
+    path = cache_root() / "bones" / f"{spec.name}-{key}{tag}.npz"
     if path.is_file():
         try:
             with np.load(path, allow_pickle=False) as data:
-                return {b.name: (data[f"{b.name}/points"], data[f"{b.name}/triangles"]) for b in spec.bones}
-        except (OSError, ValueError, KeyError):
+                return {name: data[name] for name in data.files}
+        except (OSError, ValueError):
             pass  # unreadable: built again and overwritten
-    shapes = _shapes(spec.model_dump_json(exclude_unset=True))
+    arrays = build()
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.writing.npz")
-    np.savez(tmp, **{f"{n}/{part}": a for n, arrays in shapes.items() for part, a in zip(("points", "triangles"), arrays)})
+    np.savez(tmp, **arrays)
     os.replace(tmp, path)
-    return {name: (p.copy(), t.copy()) for name, (p, t) in shapes.items()}
+    return arrays
+
+
+def bone_shapes(spec) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Every bone of a model as (points (n, 3), triangles (k, 3)) in arm coordinates, forearm
+    bones at theta = 0 (turn them with the forearm). Built once per model (a few seconds) and
+    kept in the cache folder (:func:`cached_bone_arrays`)."""
+
+    def build() -> dict[str, np.ndarray]:
+        shapes = _shapes(spec.model_dump_json(exclude_unset=True))
+        return {f"{n}/{part}": a.copy() for n, arrays in shapes.items() for part, a in zip(("points", "triangles"), arrays)}
+
+    data = cached_bone_arrays(spec, "", SHAPES_VERSION, build)
+    return {b.name: (data[f"{b.name}/points"], data[f"{b.name}/triangles"]) for b in spec.bones}
