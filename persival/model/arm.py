@@ -24,6 +24,7 @@ from persival.model.arm_state import ArmState
 from persival.model.assembly import MaterialField
 from persival.model.bone_fields import bone_fields
 from persival.model.mesh import Tet10Mesh
+from persival.model.muscle_group import MuscleGroup
 from persival.model.muscle_state import MusclePath, MuscleState
 from persival.model.muscle_unit import MuscleUnit
 from persival.model.obstacles import bone_obstacles
@@ -53,6 +54,12 @@ class ArmModel(ArmStateCache, ArmBody):
         # below 1e-4 N mm; a tighter floor sits at round-off in nearly unloaded states
         self.options = options or SolverOptions(atol=1e-6)
         self.units = {m.name: self._unit(m) for m in self.spec.ordered_muscles()}
+        # muscles that touch each other: one FE problem per group (docs/theory.md, 3.5)
+        self.groups = {}
+        for names in self.spec.contact.touching:
+            group = MuscleGroup([self.units[n] for n in names], self.spec.contact.penalty,
+                                self.spec.contact.attachment_mm, self.options)
+            self.groups.update({n: group for n in names})
         self._base: ArmState | None = None
 
     def _unit(self, muscle: Muscle) -> MuscleUnit:
@@ -91,7 +98,7 @@ class ArmModel(ArmStateCache, ArmBody):
     def set_options(self, options: SolverOptions) -> None:
         """Solver options of every solve of this model (retries use smaller load steps)."""
         self.options = options
-        for unit in self.units.values():
+        for unit in [*self.units.values(), *self.groups.values()]:
             unit.options = options
 
     # -- solves -------------------------------------------------------------------------------
@@ -211,11 +218,21 @@ class ArmModel(ArmStateCache, ArmBody):
         (module muscle_unit); g < 0 turns the forearm towards flexion.
         """
         states, g, dg = {}, 0.0, 0.0
-        for muscle, a in zip(self.spec.ordered_muscles(), activations):
-            # near corrections keep their start's slope (chord in theta: dg need not be exact)
-            state = self.units[muscle.name].solve(theta_deg, float(a), start[muscle.name],
-                                                  tracker and tracker.muscle(muscle.name), fresh_slope=False)
-            states[muscle.name] = state
+        activation = {m.name: float(a) for m, a in zip(self.spec.ordered_muscles(), activations)}
+        for muscle in self.spec.ordered_muscles():
+            if muscle.name in states:
+                continue  # solved with its group
+            group = self.groups.get(muscle.name)
+            if group is not None:
+                solved = group.solve(theta_deg, {n: activation[n] for n in group.names}, {n: start[n] for n in group.names},
+                                     tracker and tracker.muscle(" + ".join(group.names)))
+            else:
+                # near corrections keep their start's slope (chord in theta: dg need not be exact)
+                solved = {muscle.name: self.units[muscle.name].solve(theta_deg, activation[muscle.name], start[muscle.name],
+                                                                     tracker and tracker.muscle(muscle.name),
+                                                                     fresh_slope=False)}
+            states.update(solved)
+        for state in states.values():
             g -= state.moment
             dg -= state.moment_slope
             if statistics is not None:

@@ -153,6 +153,9 @@ class Contact(_Strict):
                                 "their shaped surfaces (a sampled distance field), not by their capsules")
     attachment_mm: float = Field(10.0, ge=0, description="mm: a muscle's surface this near its two ends (its "
                                  "attachments) does not touch the shaped surfaces")
+    touching: list[list[str]] = Field(default_factory=list, description="groups of muscles that touch each other "
+                                      "(frictionless penalty contact): each group is solved as one FE problem "
+                                      "(persival.model.muscle_group); a muscle in one group at most")
 
 
 class Outline(_Strict):
@@ -332,6 +335,11 @@ class ArmModelFile(_Strict):
             if unknown:
                 raise ValueError(f"muscle {m.name!r} wraps over unknown bone(s) or wall(s) {unknown}; the bones and "
                                  f"walls are {bone_names}")
+        grouped = [n for group in self.contact.touching for n in group]
+        if any(len(group) < 2 for group in self.contact.touching) or len(grouped) != len(set(grouped)) \
+                or not set(grouped) <= set(names):
+            raise ValueError(f"[contact] touching must list groups of two or more known muscles, each muscle in one "
+                             f"group at most; got {self.contact.touching} (muscles: {', '.join(names)})")
         _distinct_heights(self.skin, "skin")
         if not self.profiles:
             raise ValueError("at least one mesh profile is required")

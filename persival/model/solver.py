@@ -60,6 +60,11 @@ class SolverOptions:
     # earlier iteration, or the previous solve of the same body), refined against the current
     # tangent; a factorization only where the refinement does not contract (no hinge only)
     reuse_factorization: bool = False
+    # each load step starts from the previous one extrapolated along its secant; without it, from
+    # the tangent's response to the prescribed motion (one more factorization per step). Bodies in
+    # contact with each other need the latter: an extrapolation can carry a point through the
+    # thin part of its neighbour, into a spurious equilibrium
+    secant_predictor: bool = True
 
 
 @dataclass
@@ -195,7 +200,14 @@ class QuasiStaticSolver:
             self._K_ff = sp.csr_matrix((K.data[self._ff_take], self._ff_indices, self._ff_indptr), shape=(n, n))
         else:
             np.take(K.data, self._ff_take, out=self._K_ff.data)
-        return self._K_ff
+        outside = getattr(K, "outside", None)
+        if outside is None:
+            return self._K_ff
+        # couplings between bodies in contact (persival.model.muscle_contact): a new pattern
+        # whenever the contact pairs change (the sparse solver redoes its analysis then)
+        merged = (self._K_ff + outside[self.free][:, self.free]).tocsr()
+        merged.sort_indices()
+        return merged
 
     def _apply_constraints(self, u: np.ndarray, t: float, theta: float | None) -> None:
         for c in self.constraints:
@@ -231,10 +243,21 @@ class QuasiStaticSolver:
             upper = C.row <= C.col
             key = C.row[upper].astype(np.int64) * n + C.col[upper]
             pos = np.minimum(np.searchsorted(self._pattern_keys, key), len(self._pattern_keys) - 1)
-            if not np.array_equal(self._pattern_keys[pos], key):
+            inside = self._pattern_keys[pos] == key
+            if not inside.all() and not getattr(term, "couples_bodies", False):
                 raise ValueError(f"extra term {type(term).__name__} couples DOFs outside the finite-element pattern")
-            np.add.at(K.data, pos, C.data[upper])
+            np.add.at(K.data, pos[inside], C.data[upper][inside])
+            if not inside.all():  # contact between two bodies: kept beside the FE pattern
+                outside = sp.csr_matrix((C.data[upper][~inside], (C.row[upper][~inside], C.col[upper][~inside])),
+                                        shape=K.shape)
+                K.outside = outside if getattr(K, "outside", None) is None else K.outside + outside
         return f
+
+    def _matvec(self, K, x: np.ndarray) -> np.ndarray:
+        """K x for the upper-triangle tangent, with any entries beside the FE pattern (``K.outside``)."""
+        y = symmetric_matvec(K, x)
+        outside = getattr(K, "outside", None)
+        return y if outside is None else y + symmetric_matvec(outside, x)
 
     def _set_load_factor(self, t: float) -> None:
         for term in self.extra_terms:
@@ -270,7 +293,7 @@ class QuasiStaticSolver:
             return r_theta, None, None
         G = np.zeros(self.assembler.n_dofs)
         G[h.dofs] = dx.ravel()
-        KG = symmetric_matvec(K, G)
+        KG = self._matvec(K, G)
         k_tt = float(G @ KG) + float(np.sum(f_h * d2x)) - dM_ext
         return r_theta, KG[self.free], k_tt
 
@@ -305,7 +328,7 @@ class QuasiStaticSolver:
         moving with s, docs/theory.md, 3.5): the free DOFs then solve ``K_ff du_f = -(K g + df/ds)_f``,
         and the first value is still ``g . K du`` (the rate of the constrained DOFs' reaction
         along g)."""
-        Kg = symmetric_matvec(K, g)
+        Kg = self._matvec(K, g)
         k_f = Kg[self.free]
         b = k_f if force_rate is None else k_f + np.asarray(force_rate, dtype=float)[self.free]
         x = self._refined_solve(K, b) if reuse_factorization and self._factor_is_recent else None
@@ -386,7 +409,7 @@ class QuasiStaticSolver:
                 # stored state) needs no predictor: it would cost a factorization for nothing
                 if np.abs(jump).max() > 1e-6 * (1.0 + np.abs(u_start).max()):
                     K, _ = self._assemble(u_start, activation, stats)
-                    u[self.free] += self._factorize_and_solve(K, -symmetric_matvec(K, jump)[self.free], stats)
+                    u[self.free] += self._factorize_and_solve(K, -self._matvec(K, jump)[self.free], stats)
             return u, theta
 
         try:
@@ -518,7 +541,8 @@ class QuasiStaticSolver:
         while t < 1.0:
             t_new = min(1.0, t + dt)
             act = start + t_new * (target - start)
-            secant = None if rate is None else ((t_new - t) * rate[0], (t_new - t) * rate[1])
+            secant = None if rate is None or not opts.secant_predictor else ((t_new - t) * rate[0],
+                                                                             (t_new - t) * rate[1])
             try:
                 u_new, theta_new, tangent, f, history = self._newton_step(u, theta, t_new, act, stats, secant)
             except (ConvergenceError, InvertedElementError, SingularMatrixError) as exc:
