@@ -12,8 +12,9 @@ from persival.model.solver import ConvergenceError
 def open_tables(arm: ArmModel, tables: str | None = None):
     """The complete response table of ``arm`` (default folder: its state cache), or a clear error."""
     from persival.model.state_cache import mesh_fingerprint
-    from persival.tables.response_table import ResponseTable, default_table_dir
+    from persival.tables.response_table import ResponseTable, default_table_dir, refuse_touching_muscles
 
+    refuse_touching_muscles(arm)
     root = tables or default_table_dir(arm)
     command = f"persival tables --profile {arm.profile}" + (f" --model {arm.model_file}" if arm.model_file else "")
     try:

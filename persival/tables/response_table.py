@@ -76,6 +76,7 @@ class ResponseTable:
     @classmethod
     def create_or_open(cls, root: str | Path, arm, angles=DEFAULT_ANGLES, levels=DEFAULT_LEVELS) -> ResponseTable:
         """The table at ``root`` for this arm and grid: opened if it exists (must match), else created."""
+        refuse_touching_muscles(arm)
         angles, levels = check_grids(angles, levels)
         root = Path(root)
         if (root / "header.json").exists():
@@ -218,6 +219,16 @@ class ResponseTable:
         done = self.done
         return float(sum(float(self.column_summary(m, j)["seconds"]) for i, m in enumerate(MUSCLES)
                          for j in range(len(self.levels)) if done[i, j]))
+
+
+def refuse_touching_muscles(arm) -> None:
+    """A table holds each muscle over (theta, its own activation): muscles that touch each other
+    (``[contact] touching``) depend on their group's activations, which it cannot hold."""
+    groups = {" + ".join(group.names) for group in arm.groups.values()}
+    if groups:
+        raise ValueError(f"the response tables hold each muscle over (elbow angle, its own activation); this model's "
+                         f"muscles {', '.join(sorted(groups))} touch each other and depend on each other's activations "
+                         f"(docs/theory.md 3.5): solve it with `persival simulate --method direct` (or --option method=direct)")
 
 
 def _write_atomic(path: Path, data: bytes) -> None:
