@@ -15,7 +15,7 @@ def differences(contact, x0: np.ndarray, h: float = 1e-6) -> tuple[float, float,
     for j in range(x.size):
         e = np.zeros(x.size)
         e[j] = h
-        K_fd[:, j] = (contact.force_and_tangent(x + e)[0] - contact.force_and_tangent(x - e)[0]) / (2 * h)
+        K_fd[:, j] = (contact.force(x + e) - contact.force(x - e)) / (2 * h)
         f_fd[j] = (contact.energy(x + e) - contact.energy(x - e)) / (2 * h)
     scale = np.abs(K).max()
     return np.abs(K - K.T).max() / scale, np.abs(K_fd - K).max() / scale, np.abs(f_fd - f).max() / np.abs(f).max()
