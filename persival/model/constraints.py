@@ -50,6 +50,15 @@ class Dirichlet:
         return points[self.nodes].mean(axis=0)
 
 
+def angle_derivatives(positions_at: Callable[[float], np.ndarray], theta_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """dx/dtheta and d2x/dtheta2 per radian of positions given at an angle (deg), by central
+    differences (4th order for the velocity, whose error enters the moment residual; h = 1e-3 rad
+    gives about 1e-12 relative error)."""
+    h = np.degrees(1e-3)
+    xm2, xm1, x0, xp1, xp2 = (positions_at(theta_deg + k * h) for k in (-2, -1, 0, 1, 2))
+    return (xm2 - 8.0 * xm1 + 8.0 * xp1 - xp2) / (12.0 * 1e-3), (xp1 - 2.0 * x0 + xm1) / 1e-6
+
+
 @dataclass
 class Hinge:
     """Nodes tied to a rigid body that rotates about a fixed axis (the elbow, docs/theory.md, 3.1).
@@ -152,16 +161,8 @@ class Hinge:
         return a + y + vy + np.cross(v, vy) / (1.0 + cos)
 
     def velocity(self, points: np.ndarray, theta_deg: float) -> tuple[np.ndarray, np.ndarray]:
-        """dx/dtheta and d2x/dtheta2 per radian, (n, 3) each.
-
-        Central differences (4th order for the velocity, whose error enters the moment
-        residual; h = 1e-3 rad gives about 1e-12 relative error).
-        """
-        h = np.degrees(1e-3)
-        xm2, xm1, x0, xp1, xp2 = (self.positions(points, theta_deg + k * h) for k in (-2, -1, 0, 1, 2))
-        velocity = (xm2 - 8.0 * xm1 + 8.0 * xp1 - xp2) / (12.0 * 1e-3)
-        acceleration = (xp1 - 2.0 * x0 + xm1) / 1e-6
-        return velocity, acceleration
+        """dx/dtheta and d2x/dtheta2 per radian, (n, 3) each (:func:`angle_derivatives`)."""
+        return angle_derivatives(lambda theta: self.positions(points, theta), theta_deg)
 
     def displacement_at(self, points: np.ndarray, theta_deg: float) -> np.ndarray:
         return (self.positions(points, theta_deg) - points[self.nodes]).ravel()

@@ -178,6 +178,30 @@ class ObstacleContact:
             f_p[a] -= (self.penalty * self.weights[a] * g[a])[:, None] * n[a]
         return (self.interpolation.T @ f_p).ravel()
 
+    def angle_rates(self, x: np.ndarray, obstacles_at: Callable[[float], Sequence], theta_deg: float,
+                    step_deg: float, slopes: bool = True) -> tuple[float, float, np.ndarray | None]:
+        """P = dPi_c/dtheta|_x (N mm/rad), dP/dtheta|_x and df_c/dtheta|_x (n_dofs,) by central
+        differences in theta, the obstacles at an angle from ``obstacles_at``; they are left at
+        ``theta_deg``. Without ``slopes``: P alone (0 and None for the rest)."""
+        h = np.radians(step_deg)
+        energy, force = [], []
+        for step in (-1, 0, 1) if slopes else (-1, 1):
+            self.obstacles = tuple(obstacles_at(theta_deg + step * step_deg))
+            energy.append(self.energy(x))
+            if slopes and step:
+                force.append(self.force(x))
+        self.obstacles = tuple(obstacles_at(theta_deg))
+        P = (energy[-1] - energy[0]) / (2 * h)
+        if not slopes:
+            return P, 0.0, None
+        return P, (energy[2] - 2 * energy[1] + energy[0]) / h**2, (force[1] - force[0]) / (2 * h)
+
+    def load_and_depth(self, x: np.ndarray) -> tuple[float, float]:
+        """What a state reports of its contact: the summed magnitude of the nodal contact forces (N)
+        and the deepest penetration (mm)."""
+        return (float(np.linalg.norm(self.force(x).reshape(-1, 3), axis=1).sum()),
+                float(self.penetration(x).max(initial=0.0)))
+
     def penetration(self, x: np.ndarray) -> np.ndarray:
         """Largest penetration (mm, >= 0) of each contact point into any obstacle."""
         depth = np.zeros(self.interpolation.shape[0])

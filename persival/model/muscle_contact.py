@@ -197,18 +197,32 @@ class MutualContact:
         x = np.asarray(x, dtype=float).reshape(-1, 3)
         return sum(self.penalty * float(w @ onset_energy(D)) for _, w, *_, D in self._active(x))
 
+    def _weighted_gradients(self, x: np.ndarray):
+        """Per pass: the pairs' nodes (k, 11), eps w, the other body, its elements, X, xi and
+        eps w d(e(D))/dX (k, 11, 3). A Newton iterate: the elements are remembered."""
+        for node, w, other, cell, X, xi, _ in self._active(x, remember=True):
+            ew = self.penalty * w
+            yield (np.column_stack([node, cell]), ew, other, cell, X, xi,
+                   ew[:, None, None] * _depth_gradient(X, other, cell, xi))
+
+    def force(self, x: np.ndarray) -> np.ndarray:
+        """dPi/dx (n_dofs,) alone, without the Hessian's 66 gradient evaluations per point."""
+        x = np.asarray(x, dtype=float).reshape(-1, 3)
+        f = np.zeros_like(x)
+        for ids, *_, gradient in self._weighted_gradients(x):
+            np.add.at(f, ids.ravel(), gradient.reshape(-1, 3))
+        return f.ravel()
+
     def force_and_tangent(self, x: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix]:
         """dPi/dx (n_dofs,) and its symmetric Hessian (the pairs' gradients by central differences)."""
         x = np.asarray(x, dtype=float).reshape(-1, 3)
         f = np.zeros_like(x)
         rows, cols, vals = [], [], []
         h = self.difference_step
-        for node, w, other, cell, X, xi, _ in self._active(x, remember=True):
-            ids = np.column_stack([node, cell])  # (k, 11)
-            ew = self.penalty * w
-            np.add.at(f, ids.ravel(), (ew[:, None, None] * _depth_gradient(X, other, cell, xi)).reshape(-1, 3))
-            k = len(node)
-            steps = h * np.eye(33).reshape(1, 33, 11, 3)
+        steps = h * np.eye(33).reshape(1, 33, 11, 3)
+        for ids, ew, other, cell, X, xi, gradient in self._weighted_gradients(x):
+            np.add.at(f, ids.ravel(), gradient.reshape(-1, 3))
+            k = len(ids)
             grads = [_depth_gradient((X[:, None] + steps * sign).reshape(-1, 11, 3), other, np.repeat(cell, 33, axis=0),
                                      np.repeat(xi, 33, axis=0)).reshape(k, 33, 33) for sign in (1.0, -1.0)]
             H = (grads[0] - grads[1]).transpose(0, 2, 1) / (2 * h)
@@ -222,16 +236,6 @@ class MutualContact:
             return f.ravel(), sp.csr_matrix((n, n))
         K = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
         return f.ravel(), K
-
-    def force(self, x: np.ndarray) -> np.ndarray:
-        """dPi/dx (n_dofs,) alone, without the Hessian's 66 gradient evaluations per point."""
-        x = np.asarray(x, dtype=float).reshape(-1, 3)
-        f = np.zeros_like(x)
-        for node, w, other, cell, X, xi, _ in self._active(x, remember=True):
-            ids = np.column_stack([node, cell])
-            gradient = _depth_gradient(X, other, cell, xi)
-            np.add.at(f, ids.ravel(), (self.penalty * w[:, None, None] * gradient).reshape(-1, 3))
-        return f.ravel()
 
     def penetration(self, x: np.ndarray) -> float:
         """Deepest point inside the other body by its distance field, less the clearance (mm, 0 if none)."""

@@ -23,6 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from persival.model.assembly import MaterialField
+from persival.model.constraints import angle_derivatives
 from persival.model.contact import ObstacleContact
 from persival.model.mesh import Tet10Mesh
 from persival.model.muscle_contact import ContactBody, MutualContact
@@ -53,10 +54,9 @@ class MovingFace:
         return (self.positions(theta) - points[self.nodes]).ravel()
 
     def velocity(self, theta_deg: float) -> tuple[np.ndarray, np.ndarray]:
-        """dx/dtheta, d2x/dtheta2 per radian (central differences, as Hinge.velocity)."""
-        h = np.degrees(1e-3)
-        xm2, xm1, x0, xp1, xp2 = (self.positions(theta_deg + k * h) for k in (-2, -1, 0, 1, 2))
-        return ((xm2 - 8.0 * xm1 + 8.0 * xp1 - xp2) / 12e-3).ravel(), ((xp1 - 2.0 * x0 + xm1) / 1e-6).ravel()
+        """dx/dtheta, d2x/dtheta2 per radian (flat, the face's DOFs)."""
+        velocity, acceleration = angle_derivatives(self.positions, theta_deg)
+        return velocity.ravel(), acceleration.ravel()
 
     def moment_centre(self, points: np.ndarray) -> np.ndarray:
         return points[self.nodes].mean(axis=0)
@@ -160,21 +160,9 @@ class MuscleGroup:
 
     def _contact_rates(self, theta_deg: float, x: np.ndarray):
         """Per muscle: P = dPi_c/dtheta|_x, dP/dtheta and df_c/dtheta (central differences, as the unit's)."""
-        h = np.radians(self.contact_step_deg)
-        rates = []
-        for unit, contact in zip(self.units, self.bones):
-            if contact is None:
-                rates.append((0.0, 0.0, np.zeros(x.size)))
-                continue
-            energy, force = [], []
-            for step in (-1, 0, 1):
-                contact.obstacles = tuple(unit.path.bones(theta_deg + step * self.contact_step_deg))
-                energy.append(contact.energy(x))
-                force.append(contact.force(x))
-            contact.obstacles = tuple(unit.path.bones(theta_deg))
-            rates.append(((energy[2] - energy[0]) / (2 * h), (energy[2] - 2 * energy[1] + energy[0]) / h**2,
-                          (force[2] - force[0]) / (2 * h)))
-        return rates
+        return [(0.0, 0.0, np.zeros(x.size)) if contact is None
+                else contact.angle_rates(x, unit.path.bones, theta_deg, self.contact_step_deg)
+                for unit, contact in zip(self.units, self.bones)]
 
     def _states(self, theta_deg: float, activations: dict[str, float], solution) -> dict[str, MuscleState]:
         """Each muscle's state (its unit's frame): moment, its slope with the whole group
@@ -193,7 +181,7 @@ class MuscleGroup:
         rates = self._contact_rates(theta_deg, x)
         total_rate = sum(r[2] for r in rates)
         _, du = self.solver.condensed_response(K, g, force_rate=total_rate)
-        Kdu = self.solver._matvec(K, du)
+        Kdu = self.solver.matvec(K, du)
         states = {}
         for k, (unit, faces, pairs) in enumerate(zip(self.units, self.faces, velocities)):
             dofs = np.concatenate([face.dofs for face in faces])
@@ -219,8 +207,7 @@ class MuscleGroup:
         pressure = depth = 0.0
         if contact is not None:
             contact.obstacles = tuple(unit.path.bones(theta_deg))
-            pressure = float(np.linalg.norm(contact.force(x).reshape(-1, 3), axis=1).sum())
-            depth = float(contact.penetration(x).max(initial=0.0))
+            pressure, depth = contact.load_and_depth(x)
         F = unit.assembler.deformation_gradient((y - unit.mesh.points).ravel())
         return MuscleState(
             theta_deg, unit.length(theta_deg), activation, y - unit.mesh.points,

@@ -364,8 +364,7 @@ class MuscleUnit:
         if self.contact is not None:
             x = self.mesh.points + u
             self.contact.obstacles = tuple(self.obstacles(theta_deg))
-            pressure = float(np.linalg.norm(self.contact.force(x).reshape(-1, 3), axis=1).sum())
-            depth = float(self.contact.penetration(x).max(initial=0.0))
+            pressure, depth = self.contact.load_and_depth(x)
         return MuscleState(theta_deg, float(L), activation, u, tension, -float(work + contact_work),
                            float("nan"), 0.0, contact_force=pressure, max_penetration=depth)
 
@@ -374,19 +373,7 @@ class MuscleUnit:
         differences in theta (zeros and None without bones)."""
         if self.contact is None:
             return 0.0, 0.0, None
-        x = self.mesh.points + u
-        h = np.radians(self.contact_step_deg)
-        energy, force = [], []
-        for step in (-1, 0, 1) if slopes else (-1, 1):
-            self.contact.obstacles = tuple(self.obstacles(theta_deg + step * self.contact_step_deg))
-            energy.append(self.contact.energy(x))
-            if slopes and step:
-                force.append(self.contact.force(x))
-        self.contact.obstacles = tuple(self.obstacles(theta_deg))
-        P = (energy[-1] - energy[0]) / (2 * h)
-        if not slopes:
-            return P, 0.0, None
-        return P, (energy[2] - 2 * energy[1] + energy[0]) / h**2, (force[1] - force[0]) / (2 * h)
+        return self.contact.angle_rates(self.mesh.points + u, self.obstacles, theta_deg, self.contact_step_deg, slopes)
 
 
 __all__ = ["ConvergenceError", "MusclePath", "MuscleState", "MuscleUnit"]

@@ -129,10 +129,11 @@ class QuasiStaticSolver:
     ``extra_terms``: further potential terms (contact with rigid obstacles, docs/theory.md, 3.5; see
     :mod:`persival.model.contact`). Each has ``force_and_tangent(x) -> (f (n_dofs,), K)`` at the
     current node positions ``x = X + u`` (n_nodes, 3): its gradient and its full symmetric
-    Hessian (sparse, n_dofs x n_dofs), added to the residual and the tangent. K's entries must
-    lie in the FE pattern (a node's own 3x3 block always does): they are added into the
-    assembled matrix in place, so the pattern, and the sparse solver's symbolic analysis, stay
-    fixed while a contact active set changes. An optional ``set_load_factor(t)`` is called
+    Hessian (sparse, n_dofs x n_dofs), added to the residual and the tangent, and ``force(x)``
+    (the gradient alone). K's entries must lie in the FE pattern (a node's own 3x3 block always
+    does): they are added into the assembled matrix in place, so the pattern, and the sparse
+    solver's symbolic analysis, stay fixed while a contact active set changes; a term with
+    ``couples_bodies`` (contact between bodies) may go beyond it. An optional ``set_load_factor(t)`` is called
     before each load step's Newton iterations. A term that depends on a free hinge's angle is
     not linearized in it (prescribed angles and fixed obstacles are exact).
     """
@@ -235,10 +236,11 @@ class QuasiStaticSolver:
         x = self.mesh.points + np.asarray(u, dtype=float).reshape(-1, 3)
         n = self.assembler.n_dofs
         for term in self.extra_terms:
+            if K is None:
+                f = f + term.force(x)
+                continue
             f_term, K_term = term.force_and_tangent(x)
             f = f + f_term
-            if K is None:
-                continue
             C = sp.coo_matrix(K_term)
             upper = C.row <= C.col
             key = C.row[upper].astype(np.int64) * n + C.col[upper]
@@ -253,7 +255,7 @@ class QuasiStaticSolver:
                 K.outside = outside if getattr(K, "outside", None) is None else K.outside + outside
         return f
 
-    def _matvec(self, K, x: np.ndarray) -> np.ndarray:
+    def matvec(self, K, x: np.ndarray) -> np.ndarray:
         """K x for the upper-triangle tangent, with any entries beside the FE pattern (``K.outside``)."""
         y = symmetric_matvec(K, x)
         outside = getattr(K, "outside", None)
@@ -293,7 +295,7 @@ class QuasiStaticSolver:
             return r_theta, None, None
         G = np.zeros(self.assembler.n_dofs)
         G[h.dofs] = dx.ravel()
-        KG = self._matvec(K, G)
+        KG = self.matvec(K, G)
         k_tt = float(G @ KG) + float(np.sum(f_h * d2x)) - dM_ext
         return r_theta, KG[self.free], k_tt
 
@@ -328,7 +330,7 @@ class QuasiStaticSolver:
         moving with s, docs/theory.md, 3.5): the free DOFs then solve ``K_ff du_f = -(K g + df/ds)_f``,
         and the first value is still ``g . K du`` (the rate of the constrained DOFs' reaction
         along g)."""
-        Kg = self._matvec(K, g)
+        Kg = self.matvec(K, g)
         k_f = Kg[self.free]
         b = k_f if force_rate is None else k_f + np.asarray(force_rate, dtype=float)[self.free]
         x = self._refined_solve(K, b) if reuse_factorization and self._factor_is_recent else None
@@ -409,7 +411,7 @@ class QuasiStaticSolver:
                 # stored state) needs no predictor: it would cost a factorization for nothing
                 if np.abs(jump).max() > 1e-6 * (1.0 + np.abs(u_start).max()):
                     K, _ = self._assemble(u_start, activation, stats)
-                    u[self.free] += self._factorize_and_solve(K, -self._matvec(K, jump)[self.free], stats)
+                    u[self.free] += self._factorize_and_solve(K, -self.matvec(K, jump)[self.free], stats)
             return u, theta
 
         try:

@@ -20,14 +20,17 @@ from persival.model.solver import QuasiStaticSolver, SolverOptions
 class DeadLoad:
     """Fixed nodal forces F_ext, ramped with the load factor: residual term -t F_ext, no stiffness."""
 
-    def __init__(self, force):
-        self.force, self.t = np.asarray(force, dtype=float), 1.0
+    def __init__(self, load):
+        self.load, self.t = np.asarray(load, dtype=float), 1.0
 
     def set_load_factor(self, t):
         self.t = t
 
+    def force(self, x):
+        return -self.t * self.load
+
     def force_and_tangent(self, x):
-        return -self.t * self.force, sp.csr_matrix((self.force.size, self.force.size))
+        return self.force(x), sp.csr_matrix((self.load.size, self.load.size))
 
 
 def pressed_block(obstacle, pressure, penalty, contact_points="on_faces"):
