@@ -135,6 +135,12 @@ class Wall(_Strict):
     start: Vector | None = Field(None, description="sleeve: one end of its axis")
     end: Vector | None = Field(None, description="sleeve: the other end")
     radius: float | None = Field(None, gt=0, description="sleeve: mm from its axis")
+    turns: float = Field(0.0, description="fraction of the elbow's flexion beyond turns_from_deg that the wall turns "
+                         "by about an axis parallel to the hinge through pivot (positive: with the forearm; "
+                         "docs/theory.md 3.5, 'Walls that turn with the elbow')")
+    turns_from_deg: float = Field(60.0, description="deg: the elbow angle from which the wall turns (a smooth onset "
+                                  "over about 10 deg)")
+    pivot: Vector | None = Field(None, description="a point of the axis the wall turns about (mm; required with turns)")
 
     @model_validator(mode="after")
     def _complete(self):
@@ -142,6 +148,8 @@ class Wall(_Strict):
         missing = [k for k in need if getattr(self, k) is None]
         if missing:
             raise ValueError(f"wall {self.name!r}: a {self.kind} needs {', '.join(missing)}")
+        if self.turns != 0 and self.pivot is None:
+            raise ValueError(f"wall {self.name!r}: a wall that turns (turns = {self.turns:g}) needs a pivot")
         if self.kind == "septum" and self.band[1] - self.band[0] < 2 * self.ramp:
             raise ValueError(f"wall {self.name!r}: its band must be at least two ramps ({2 * self.ramp:g} mm) long")
         return self

@@ -25,7 +25,7 @@ import numpy as np
 from persival.model.obstacles import Capsule, _as_vector
 from persival.model.rotations import rotation_about
 
-__all__ = ["Septum", "Sleeve", "wall_obstacles"]
+__all__ = ["Septum", "Sleeve", "turn_deg", "wall_obstacles"]
 
 
 def _smoothstep(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -127,14 +127,27 @@ def septum_sides(walls, centre, axis, mesh_angle_deg: float, points: np.ndarray)
     return sides
 
 
+def turn_deg(wall, theta_deg: float, onset_deg: float = 10.0) -> float:
+    """How far a wall with ``turns`` has turned at elbow angle theta (docs/theory.md 3.5): the
+    fraction ``turns`` of the flexion beyond ``turns_from_deg``, its onset smoothed over
+    ``onset_deg`` (a softplus, so the contact's angle rates stay smooth)."""
+    if wall.turns == 0:
+        return 0.0
+    t = (theta_deg - wall.turns_from_deg) / onset_deg
+    return wall.turns * onset_deg * (max(t, 0.0) + float(np.log1p(np.exp(-abs(t)))))
+
+
 def wall_obstacles(walls, centre, axis, theta_deg: float, sides: dict[str, float]) -> list:
-    """The walls at elbow angle theta (forearm walls turn about the hinge), each septum kept from
-    the side ``sides[name]`` (+1: its normal's side, -1: the other)."""
+    """The walls at elbow angle theta (forearm walls turn about the hinge, a wall with ``turns``
+    also about its pivot), each septum kept from the side ``sides[name]`` (+1: its normal's side,
+    -1: the other)."""
     out = []
     for wall in walls:
         obstacle = wall_of(wall)
         if isinstance(obstacle, Septum) and sides.get(wall.name, 1.0) < 0:
             obstacle = obstacle.flipped()
+        if wall.turns != 0:
+            obstacle = obstacle.transformed(rotation_about(axis, turn_deg(wall, theta_deg)), wall.pivot)
         if wall.segment == "forearm":
             obstacle = obstacle.transformed(rotation_about(axis, theta_deg), centre)
         out.append(obstacle)

@@ -41,6 +41,7 @@ def test_septum_acts_only_in_its_band_and_keeps_each_side():
     class Wall:  # a model-file entry (persival.model.arm_file.Wall)
         name, kind, segment = "septum", "septum", "upper_arm"
         point, normal, along, band, ramp = (0.0, 30.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (40.0, 160.0), 20.0
+        turns = 0.0
 
     deep = np.array([[0.0, 20.0, 100.0], [3.0, 22.0, 120.0]])
     superficial = deep + [0.0, 25.0, 0.0]
@@ -76,3 +77,39 @@ def test_the_atlas_walls_variant_keeps_biceps_and_brachialis_on_either_side_of_i
     walls = {type(o).__name__: o for o in ArmModel._bones_of(frame, triceps, line)(20.0)}
     fascia = walls["Septum"]
     assert fascia.normal @ [0.0, 1.0, 0.0] == pytest.approx(1.0) and fascia.project(line)[0].max() <= 0.0
+
+
+def test_a_wall_that_turns_with_the_elbow_turns_about_its_pivot_smoothly():
+    """``turns``: the fraction of the flexion beyond ``turns_from_deg``, a smooth onset; the plane
+    turns about the axis through its pivot (a point there stays, one 100 mm away moves on a circle)."""
+    from persival.model.walls import turn_deg
+
+    class Wall:  # a model-file entry that turns back with flexion about a pivot 140 mm up
+        name, kind, segment = "septum", "septum", "upper_arm"
+        point, normal, along, band, ramp = (0.0, 31.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (45.0, 140.0), 15.0
+        turns, turns_from_deg, pivot = -0.06, 60.0, (0.0, 31.0, 140.0)
+
+    assert abs(turn_deg(Wall, 20.0)) < 0.02  # at rest it has barely turned (0.011 deg)
+    assert turn_deg(Wall, 145.0) == pytest.approx(-0.06 * 85.0, abs=1e-3)  # beyond the onset: the fraction
+    angles = np.linspace(40.0, 80.0, 401)
+    slope = np.gradient([turn_deg(Wall, a) for a in angles], angles)
+    assert np.all(np.abs(np.diff(slope)) < 1e-3) and slope[0] > -0.01 and slope[-1] < -0.05  # smooth onset
+    origin, axis = np.zeros(3), np.array([1.0, 0.0, 0.0])
+    turned = wall_obstacles([Wall], origin, axis, 145.0, {})[0]
+    phi = np.radians(turn_deg(Wall, 145.0))
+    assert turned.project(np.array([[0.0, 31.0, 140.0]]))[0][0] == pytest.approx(0.0, abs=1e-9)  # the pivot stays
+    below = np.array([[0.0, 31.0 + 100.0 * np.sin(phi), 140.0 - 100.0 * np.cos(phi)]])  # 100 mm down the turned plane
+    assert turned.project(below)[0][0] == pytest.approx(0.0, abs=1e-9)
+    assert below[0, 1] == pytest.approx(31.0 - 8.9, abs=0.1)  # the lower band 8.9 mm further back
+
+
+def test_a_turning_wall_without_a_pivot_is_refused(tmp_path):
+    from persival.model.arm_file import ModelFileError, load_model_file
+    from persival.model.defaults import default_model_path
+
+    text = (default_model_path().parent / "variants" / "atlas_walls.toml").read_text()
+    edited = text.replace("band = [45.0, 140.0]\n", "band = [45.0, 140.0]\nturns = -0.06\n", 1)
+    assert edited != text
+    (tmp_path / "arm.toml").write_text(edited)
+    with pytest.raises(ModelFileError, match="anterior_septum.*needs a pivot"):
+        load_model_file(tmp_path / "arm.toml")
