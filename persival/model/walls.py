@@ -131,10 +131,7 @@ def turn_deg(wall, theta_deg: float, onset_deg: float = 10.0) -> float:
     """How far a wall with ``turns`` has turned at elbow angle theta (docs/theory.md 3.5): the
     fraction ``turns`` of the flexion beyond ``turns_from_deg``, its onset smoothed over
     ``onset_deg`` (a softplus, so the contact's angle rates stay smooth)."""
-    if wall.turns == 0:
-        return 0.0
-    t = (theta_deg - wall.turns_from_deg) / onset_deg
-    return wall.turns * onset_deg * (max(t, 0.0) + float(np.log1p(np.exp(-abs(t)))))
+    return wall.turns * onset_deg * float(np.logaddexp(0.0, (theta_deg - wall.turns_from_deg) / onset_deg))
 
 
 def wall_obstacles(walls, centre, axis, theta_deg: float, sides: dict[str, float]) -> list:
