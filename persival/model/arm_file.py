@@ -19,7 +19,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from persival.model.defaults import default_model_path
+from persival.model.defaults import packaged_models, resolve_model_path
 from persival.vocabulary import MUSCLES
 
 Vector = tuple[float, float, float]
@@ -413,15 +413,18 @@ def model_hash(text: str, surfaces: dict[str, bytes] | None = None) -> str:
 
 
 def load_model_file(path: str | Path | None = None) -> tuple[ArmModelFile, str]:
-    """Read and validate a model file (the packaged default when ``path`` is None).
+    """Read and validate a model file: a path, or the name of a packaged model (the built-in arm
+    when ``path`` is None; ``persival model list``).
 
     Returns the model and the sha256 of its text (provenance).
     """
-    path = Path(path) if path is not None else default_model_path()
+    path = resolve_model_path(path)
     try:
         text = path.read_text()
     except OSError as exc:
-        raise ModelFileError(f"cannot read model file {path}: {(exc.strerror or str(exc)).lower()}") from None
+        names = ", ".join(packaged_models())
+        raise ModelFileError(f"cannot read model file {path}: {(exc.strerror or str(exc)).lower()} (a path, or one of "
+                             f"the packaged models: {names})") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -1,5 +1,6 @@
-"""CLI of the model stage: ``persival model init`` (the built-in model file, to edit) and
-``persival mesh`` (a model's muscles meshed, with fibres and a repair report, for inspection)."""
+"""CLI of the model stage: ``persival model list`` (the packaged model files), ``persival model
+init`` (one of them, to edit) and ``persival mesh`` (a model's muscles meshed, with fibres and a
+repair report, for inspection)."""
 
 from __future__ import annotations
 
@@ -14,30 +15,66 @@ from persival.model.defaults import profiles_help
 
 def register(app: typer.Typer) -> None:
     """Attach ``model init`` and ``mesh`` to the main app."""
-    model_app = typer.Typer(cls=FullHelpGroup, help="The model file: write the built-in one for editing.",
+    model_app = typer.Typer(cls=FullHelpGroup, help="The model file: list the packaged ones, write one for editing.",
                             no_args_is_help=True)
     app.add_typer(model_app, name="model")
+    model_app.command("list")(list_models)
     model_app.command("init")(init)
     app.command("mesh")(mesh)
+
+
+def list_models() -> None:
+    """The model files packaged with PerSival: pass a name as --model to any command."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from persival.model.defaults import packaged_models
+
+    table = Table(title="packaged models (--model NAME)")
+    for column in ("name", "description", "file"):
+        table.add_column(column)
+    for name, path in packaged_models().items():
+        table.add_row(name, _first_comment(path.read_text()), str(path))
+    Console().print(table)
+
+
+def _first_comment(text: str) -> str:
+    """What a model file is: its opening comment's first sentence, after what it is a variant of,
+    without parentheses."""
+    import re
+
+    lines = []
+    for line in text.splitlines():
+        if not line.startswith("#"):
+            break
+        lines.append(line.lstrip("# ").strip())
+    sentence = " ".join(lines).split(". ")[0]
+    sentence = sentence.split("): ", 1)[-1]
+    sentence = re.sub(r"\s*\([^()]*\)", "", sentence)
+    return sentence.rstrip(".:")
 
 
 def init(
     out: Path = typer.Option(Path("my_arm.toml"), "--out", help="Model file to write (TOML); an existing file is "
                              "never overwritten."),
+    source: str = typer.Option("default", "--from", help="Packaged model to copy (`persival model list`)."),
 ) -> None:
-    """Write the built-in model file (bones, joint, five muscles, mesh profiles) for editing."""
+    """Write a packaged model file (bones, joint, five muscles, mesh profiles) for editing."""
     from rich.console import Console
 
-    from persival.model.defaults import default_model_path
+    from persival.model.defaults import packaged_models
 
     with user_errors():
+        models = packaged_models()
+        if source not in models:
+            raise ValueError(f"--from {source!r}: not a packaged model; choose one of {', '.join(models)}")
         check_output_file(out)
         if out.exists():
             raise FileExistsError(f"--out {out} exists; pick a new name (it is never overwritten)")
         out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(default_model_path().read_text())
-    Console().print(f"wrote {out}: the built-in model. Use it with --model {out} (persival simulate, tables, mesh); "
-                    "a muscle can take its shape from a surface file (docs/own_anatomy.md).")
+        out.write_text(models[source].read_text())
+    Console().print(f"wrote {out}: the packaged model {source!r}. Use it with --model {out} (persival simulate, tables, "
+                    "mesh); a muscle can take its shape from a surface file (docs/own_anatomy.md).")
 
 
 def mesh(

@@ -10,11 +10,31 @@ import tomllib
 from importlib import resources
 from pathlib import Path
 
-__all__ = ["default_model_path", "default_profile_names", "profiles_help"]
+__all__ = ["default_model_path", "default_profile_names", "packaged_models", "profiles_help", "resolve_model_path"]
+
+DEFAULT_MODEL_NAME = "default"
 
 
 def default_model_path() -> Path:
     return Path(str(resources.files("persival.model").joinpath("default_arm.toml")))
+
+
+def packaged_models() -> dict[str, Path]:
+    """The model files shipped with the package by name: the built-in arm ("default") and its
+    variants (persival/model/variants/NAME.toml), so that ``--model atlas_walls`` needs no path."""
+    variants = Path(str(resources.files("persival.model").joinpath("variants")))
+    return {DEFAULT_MODEL_NAME: default_model_path(), **{p.stem: p for p in sorted(variants.glob("*.toml"))}}
+
+
+def resolve_model_path(model: str | Path | None) -> Path:
+    """The file a ``--model`` value names: an existing path as given, else a packaged model's name
+    (``persival model list``), else the path as given (whose reading then fails with its own message)."""
+    if model is None:
+        return default_model_path()
+    path = Path(model)
+    if path.exists() or path.suffix or len(path.parts) > 1:
+        return path
+    return packaged_models().get(str(model), path)
 
 
 def default_profile_names() -> tuple[str, ...]:

@@ -1,11 +1,15 @@
 """The upper-limb model file (SPEC 3.3): the default loads, bad files get clear errors."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
+from persival.cli import app
 from persival.model.arm import ArmModel, muscle_profile
 from persival.model.arm_file import ModelFileError, load_model_file
-from persival.model.defaults import default_model_path
+from persival.model.defaults import default_model_path, packaged_models, resolve_model_path
 from persival.model.geometry import swept_solid_mesh
 from persival.vocabulary import MUSCLES
 
@@ -53,6 +57,8 @@ def test_bad_model_files_are_refused(tmp_path, old, new, message):
 def test_missing_file_and_unknown_profile(tmp_path):
     with pytest.raises(ModelFileError, match="cannot read"):
         load_model_file(tmp_path / "nope.toml")
+    with pytest.raises(ModelFileError, match="packaged models: default, atlas_arm"):
+        load_model_file("atlas_wall")  # a misspelt name lists the names
     model, _ = load_model_file()
     with pytest.raises(ModelFileError, match="unknown profile 'huge'"):
         model.profile("huge")
@@ -117,6 +123,34 @@ def test_simulate_command_refuses_bad_input_before_meshing(tmp_path):
     result = runner.invoke(app, ["simulate", "-a", "0.5,0,0,0,0", "--model", str(bad), "--out", str(out)])
     assert result.exit_code == 2 and "not valid TOML" in result.output
     assert not out.exists()  # nothing written
+
+
+def test_packaged_models_load_by_name(tmp_path, monkeypatch):
+    """--model takes a packaged model's name; a file of that name in the working folder wins."""
+    walls = default_model_path().parent / "variants" / "atlas_walls.toml"
+    assert packaged_models()["atlas_walls"] == walls and packaged_models()["default"] == default_model_path()
+    assert load_model_file("atlas_walls")[1] == load_model_file(walls)[1]
+    assert load_model_file("default")[1] == load_model_file(None)[1]
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "atlas_walls").write_text(default_model_path().read_text())
+    assert resolve_model_path("atlas_walls") == Path("atlas_walls")
+    assert load_model_file("atlas_walls")[1] == load_model_file(None)[1]
+
+
+def test_model_list_and_init_from_a_variant(tmp_path):
+    runner = CliRunner()
+    listing = runner.invoke(app, ["model", "list"], env={"COLUMNS": "200"})
+    assert listing.exit_code == 0, listing.output
+    for name in packaged_models():
+        assert name in listing.output
+    assert "kept apart by a fascial wall" in listing.output  # the variant's own comment says what it is
+    out = tmp_path / "walls.toml"
+    result = runner.invoke(app, ["model", "init", "--from", "atlas_walls", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert out.read_text() == packaged_models()["atlas_walls"].read_text()
+    refused = runner.invoke(app, ["model", "init", "--from", "nosuch", "--out", str(tmp_path / "x.toml")])
+    assert refused.exit_code != 0 and "not a packaged model" in refused.output
+    assert not (tmp_path / "x.toml").exists()
 
 
 def test_biceps_on_humerus_variant_loads():
