@@ -4,14 +4,15 @@
     2 tables    OUT/tables/    the FE arm's per-muscle response tables (kept in the state cache) + moments.npz
     3 fe        OUT/fe/        three FE equilibria of the arm (state.json + VTU) and arm.png
     4 campaign  OUT/campaign/  campaign.zarr (sparse-grid design) + held_out.zarr (random states)
-    5 sg        OUT/sg/        B-spline SG of all five muscles' surfaces + the elbow angle
-    6 inverse   OUT/inverse/   activation_model.json (Theta -> alpha_opt) + plot
-    7 motion    OUT/motion/    (angle, velocity, acceleration, load) -> alpha, from the FE moments
-    8 data      OUT/data/      SG training data (alpha_opt(Theta) and random alpha)
-    9 train     OUT/networks/  pod/ (all muscles) and paper/ (the paper's net, biceps)
-   10 export    OUT/export/    ONNX models + metadata.json (docs/deployment.md)
-   11 evaluate  OUT/evaluate/  the paper's tables and figures
-   12 report    OUT/report/    index.html + results.json
+    5 anatomy   OUT/anatomy/   bodies inside each other, muscles off their beds: FE and held-out states
+    6 sg        OUT/sg/        B-spline SG of all five muscles' surfaces + the elbow angle
+    7 inverse   OUT/inverse/   activation_model.json (Theta -> alpha_opt) + plot
+    8 motion    OUT/motion/    (angle, velocity, acceleration, load) -> alpha, from the FE moments
+    9 data      OUT/data/      SG training data (alpha_opt(Theta) and random alpha)
+   10 train     OUT/networks/  pod/ (all muscles) and paper/ (the paper's net, biceps)
+   11 export    OUT/export/    ONNX models + metadata.json (docs/deployment.md)
+   12 evaluate  OUT/evaluate/  the paper's tables and figures
+   13 report    OUT/report/    index.html + results.json
 
 Resumable stage by stage: every stage leaves ``OUT/<stage>/stage.json`` with the digest of its
 inputs (its own settings plus the digests of the stages it reads); a stage whose digest is
@@ -60,6 +61,7 @@ STAGES = [
     ("tables", "the FE arm's per-muscle response tables (built once per model)", []),
     ("fe", "three FE equilibria of the arm (hanging, biceps 0.5, flexors 1)", ["model", "tables"]),
     ("campaign", "sparse-grid campaign + random held-out states", ["tables"]),
+    ("anatomy", "bodies inside each other and muscles off their beds (FE and held-out states)", ["fe", "campaign"]),
     ("structured", "per-muscle shape and moment models from the tables: the deployed model", ["tables", "campaign"]),
     ("sg", "B-spline sparse grid of five muscle surfaces + elbow angle", ["campaign"]),
     ("inverse", "least-effort activations: the angle activation model", ["sg"]),
@@ -68,7 +70,7 @@ STAGES = [
     ("train", "POD network (five muscles) and the paper's network (biceps)", ["data"]),
     ("export", "ONNX models + metadata.json", ["structured", "train", "inverse", "motion"]),
     ("evaluate", "the paper's accuracy and speed tables", ["export", "campaign", "structured", "sg", "train", "data"]),
-    ("report", "HTML report", ["evaluate", "fe", "model"]),
+    ("report", "HTML report", ["evaluate", "anatomy", "fe", "model"]),
 ]
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import typer
 
 from persival.cli_errors import check_output_dir, user_errors
-from persival.model.defaults import profiles_help
+from persival.model.defaults import profiles_help, resolve_model_path
 
 
 def register(app: typer.Typer) -> None:
@@ -33,7 +33,7 @@ def register(app: typer.Typer) -> None:
         paper_epochs: int = typer.Option(8, "--paper-epochs", min=1, help="Paper network: epochs (1 fold; the paper: 5 x 400)."),
         fe_states: bool = typer.Option(True, "--fe-states/--no-fe-states", help="Solve the three showcase FE states."),
     ) -> None:
-        """End to end: model -> FE -> campaign -> SG -> inverse -> data -> train -> export -> evaluate -> report."""
+        """End to end: model -> FE -> campaign -> anatomy -> SG -> inverse -> data -> train -> export -> evaluate -> report."""
         from persival.model.arm_body import ArmBody
         from persival.pipeline import RunConfig
         from persival.pipeline import run as run_pipeline
@@ -51,7 +51,7 @@ def register(app: typer.Typer) -> None:
             if model is not None and simulator != "arm":
                 raise ValueError("--model needs --simulator arm (the analytic stand-in has no model file)")
             config = RunConfig(profile=profile, simulator=simulator,
-                               model=None if model is None else str(model.resolve()),
+                               model=None if model is None else str(resolve_model_path(model).resolve()),
                                model_hash=None if model is None else frame.model_hash, level=level, held_out=held_out,
                                campaign_store=None if campaign_store is None else str(campaign_store.resolve()),
                                held_out_store=None if held_out_store is None else str(held_out_store.resolve()),

@@ -160,6 +160,23 @@ def campaign(out: Path, config, console) -> dict:
     return stores
 
 
+def anatomy(out: Path, config, console) -> dict:
+    """Bodies inside each other and muscles off their beds in the FE stage's and the held-out states."""
+    if config.simulator != "arm":
+        why = "the campaign runs the analytic stand-in (no FE bodies)"
+        console.print(f"  [yellow]skipped[/yellow]: {why}")
+        return {"skipped": why}
+    from persival.evaluate.anatomy_run import measure_run
+
+    with console.status("anatomy: FE and held-out states"):
+        table = measure_run(out, config.model)
+    worst = {r["pair"]: r[k] for r in table["rows"] if r.get("limit_mm") for k in ("fe_mm", "held_mm")
+             if r[k] is not None and r[k] > r["limit_mm"]}
+    console.print(f"  {table['notes'][0]}; {out}/anatomy/anatomy.md")
+    return {"states": table["states"], "pair_states_over_limit": table["pair_states_over_limit"],
+            "states_within_limits": table["states_within_limits"], "pairs_over_limit": sorted(worst)}
+
+
 def structured(out: Path, config, console) -> dict:
     """The deployed model: per-muscle shape and moment models fitted to the response tables."""
     if config.simulator != "arm":
@@ -348,13 +365,14 @@ SETTINGS = {
     "model": ["profile", "model_hash"], "tables": ["profile", "simulator", "model_hash"],
     "fe": ["profile", "simulator", "model_hash"],
     "campaign": ["profile", "simulator", "level", "held_out", "campaign_store", "held_out_store", "seed", "model_hash"],
-    "structured": ["profile", "model_hash"],
+    "anatomy": [], "structured": ["profile", "model_hash"],
     "sg": [], "inverse": [], "motion": ["moment_table", "profile", "model_hash"], "data": ["samples", "angle_fraction", "seed"],
     "train": ["pod_folds", "pod_epochs", "paper_folds", "paper_epochs", "seed"], "export": [],
     "evaluate": ["seed", "bench"], "report": [],
 }
 RUNNERS = {"model": model, "tables": tables,
-           "fe": fe, "campaign": campaign, "structured": structured, "sg": sg, "inverse": inverse, "motion": motion, "data": data,
+           "fe": fe, "campaign": campaign, "anatomy": anatomy, "structured": structured, "sg": sg, "inverse": inverse,
+           "motion": motion, "data": data,
            "train": train, "export": export, "evaluate": evaluate, "report": report}
 
 

@@ -38,7 +38,8 @@ CASES = [
     ("sections", ["folder", "--heights", "a,b", "--out", "new.png"], "malformed heights", "comma-separated numbers"),
     ("simulate", ["-a", "0,0,0,0,0", "--angle", "170", "--out", "new"], "held angle beyond the joint", "joint limits"),
     ("anatomy", ["nosuch"], "missing state folder", "not a state directory"),
-    ("anatomy", ["folder", "--store", "random.zarr"], "state folders and a store", "one of the three"),
+    ("anatomy", ["folder", "--store", "random.zarr"], "state folders and a store", "one of the four"),
+    ("anatomy", ["--run", "folder"], "a run folder with no FE states", "no FE states"),
     ("anatomy", ["--outlines", "--model", "foreign.toml"], "foreign model file", "invalid model file"),
     ("anatomy", ["--store", "random.zarr", "--out", "new.json"], "a store of the analytic stand-in",
      "anatomy needs FE arm states"),
@@ -138,6 +139,10 @@ CASES = [
     ("moments", ["--out", "afile"], "foreign file in the way of the table", "not a moment table"),
     ("moments", ["--out", "folder"], "folder where a file is expected", "is a folder, not a file"),
     ("model init", ["--out", "afile"], "existing file (never overwritten)", "exists; pick a new name"),
+    ("model init", ["--from", "atlas_wall", "--out", "new.toml"], "misspelt packaged model", "not a packaged model"),
+    ("model list", ["extra"], "an argument it does not take", BOX),
+    ("simulate", ["-a", "0,0,0,0,0", "--model", "atlas_wall", "--out", "new"], "misspelt packaged model",
+     "packaged models: default"),
     ("model init", ["--out", "folder"], "folder where a file is expected", "is a folder, not a file"),
     ("mesh", ["--model", "hole.toml", "--out", "new"], "surface with a large hole", "open surface with a hole"),
     ("mesh", ["--model", "overlap.toml", "--out", "new"], "outlines that overlap", "brachialis in biceps at 30 %"),
@@ -265,7 +270,8 @@ def test_bad_inputs_are_one_line_errors_and_leave_nothing(workdir, monkeypatch, 
         assert "Traceback" not in result.output, label
         if expected is BOX:
             assert "Usage:" in stderr and "Error" in stderr, f"{label}: no usage error\n{stderr}"
-            message = next(line.strip("│ ") for line in stderr.splitlines() if "Invalid value" in line or "Missing" in line)
+            message = next(line.strip("│ ") for line in stderr.splitlines() if "Invalid value" in line or "Missing" in line
+                           or "unexpected extra argument" in line)
         else:
             assert len(stderr.splitlines()) == 1 and stderr.startswith("error: "), f"{label}: not one line\n{stderr}"
             assert expected in stderr, f"{label}: {stderr!r} lacks {expected!r}"

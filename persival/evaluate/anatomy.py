@@ -22,8 +22,8 @@ from persival.model.mesh import Tet10Mesh
 from persival.model.output import bone_surfaces
 from persival.vocabulary import MUSCLES
 
-__all__ = ["check_outlines_table", "check_state_dirs", "check_store", "print_tables", "MUSCLE_BONE_LIMIT_MM",
-           "MUSCLE_MUSCLE_LIMIT_MM"]
+__all__ = ["check_outlines_table", "check_state_dirs", "check_store", "pair_limit_mm", "print_tables", "worst_cases",
+           "write_json", "MUSCLE_BONE_LIMIT_MM", "MUSCLE_MUSCLE_LIMIT_MM"]
 
 # docs/arm_model.md: in any state, penetration muscle-bone <= 1 mm and muscle-muscle <= 2 mm
 MUSCLE_BONE_LIMIT_MM = 1.0
@@ -111,7 +111,8 @@ def check_store(path, model_file=None, attachment_mm: float = 10.0, progress=Non
     return results
 
 
-def _limit(a: str, b: str) -> float | None:
+def pair_limit_mm(a: str, b: str) -> float | None:
+    """The most one body may reach into the other: 1 mm muscle-bone, 2 mm muscle-muscle, none for two bones."""
     muscles = (a in MUSCLES) + (b in MUSCLES)
     return {2: MUSCLE_MUSCLE_LIMIT_MM, 1: MUSCLE_BONE_LIMIT_MM}.get(muscles)
 
@@ -122,7 +123,7 @@ def worst_cases(results: list[dict]) -> dict:
     for state in results:
         for row in state["overlaps"]:
             key = (row["body"], row["inside"])
-            entry = pairs.setdefault(key, {"body": key[0], "inside": key[1], "limit_mm": _limit(*key), "states": 0,
+            entry = pairs.setdefault(key, {"body": key[0], "inside": key[1], "limit_mm": pair_limit_mm(*key), "states": 0,
                                            "most_nodes": 0, "of": row["of"], "deepest_mm": 0.0})
             entry["states"] += 1
             entry["most_nodes"] = max(entry["most_nodes"], row["nodes"])

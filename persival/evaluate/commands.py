@@ -250,6 +250,8 @@ def anatomy(
                                      "muscle's ends (its attachments)."),
     outlines: bool = typer.Option(False, "--outlines", help="Instead: the model file's muscle outlines across the "
                                   "humerus at 10/30/50/70/90 %, checked as polygons (no states needed)."),
+    run: Path | None = typer.Option(None, "--run", help="Instead: a run folder's FE and held-out states, as `persival "
+                                    "run`'s anatomy stage measures them (RUN/anatomy/)."),
     out: Path | None = typer.Option(None, "--out", help="JSON file to write (every state, and the worst per pair)."),
 ) -> None:
     """Overlap between bodies (surface nodes inside another body, deepest penetration) and each muscle's gap to its bed."""
@@ -263,10 +265,18 @@ def anatomy(
     with user_errors(StoreError, out=out):
         if out is not None:
             check_output_file(out)
-        if bool(states) + (store is not None) + outlines != 1:
-            raise ValueError("give state directories, --store STORE or --outlines (one of the three)")
+        if bool(states) + (store is not None) + outlines + (run is not None) != 1:
+            raise ValueError("give state directories, --store STORE, --run RUN or --outlines (one of the four)")
         if outlines:
             check_outlines_table(console, model, out)
+            return
+        if run is not None:
+            from persival.evaluate.anatomy_run import measure_run
+            from persival.evaluate.tables import to_rich
+
+            table = measure_run(run, model)
+            console.print(to_rich(table))
+            console.print(f"{table['notes'][0]}; wrote {run / 'anatomy'}/")
             return
         if store is not None:
             with Progress(console=console, transient=True) as bar:

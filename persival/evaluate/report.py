@@ -21,7 +21,8 @@ from persival.evaluate.tables import load_table, to_html
 
 __all__ = ["write_report", "TABLE_ORDER"]
 
-TABLE_ORDER = ("in_training", "random_activations", "random_angles", "error_propagation", "prototypes", "bench_nn")
+TABLE_ORDER = ("in_training", "random_activations", "random_angles", "error_propagation", "prototypes", "bench_nn",
+               "anatomy")
 
 _CSS = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1500px; padding: 0 1em; color: #222; }
@@ -164,6 +165,7 @@ def write_report(out: str | Path, command: str | None = None) -> Path:
     tables = _load_tables(folder)
     if not tables:
         raise FileNotFoundError(f"{folder}: no table (run `persival evaluate --run {out}` first)")
+    tables |= _load_tables(out / "anatomy")  # the run's anatomy (persival.evaluate.anatomy_run), when measured
     evaluation = json.loads((folder / "evaluation.json").read_text()) if (folder / "evaluation.json").is_file() else {}
     provenance = {"report_command": command or default_command(out, "report"), **environment(),
                   "evaluation": evaluation.get("provenance"), "skipped": evaluation.get("skipped", {}),

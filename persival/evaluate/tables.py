@@ -41,10 +41,13 @@ def cell(value, fmt: str = "{}") -> str:
 
 
 def _grid(table: dict) -> tuple[list[str], list[tuple[str, list[str]]]]:
-    """Header labels and (kind, cells) rows: ours first, then the paper's."""
+    """Header labels and (kind, cells) rows: ours first, then the paper's (a first column says
+    whose, when the table has the paper's rows)."""
     cols = table["columns"]
-    header = ["", *(c["label"] for c in cols)]
-    body = [("ours", ["PerSival", *(cell(r.get(c["key"]), c["format"]) for c in cols)]) for r in table["rows"]]
+    whose = [""] if table["paper"] else []
+    header = [*whose, *(c["label"] for c in cols)]
+    body = [("ours", [*(["PerSival"] if whose else []), *(cell(r.get(c["key"]), c["format"]) for c in cols)])
+            for r in table["rows"]]
     body += [("paper", ["paper", *(cell(r.get(c["key"]), c["format"]) for c in cols)]) for r in table["paper"]]
     return header, body
 

@@ -104,7 +104,7 @@ def test_the_coarse_hanging_arm_inside_test_agrees_with_the_winding_number(tmp_p
     from persival.model.output import write_state
 
     arm = ArmModel(profile="coarse")
-    state_dir = write_state(arm, arm.base_state(), tmp_path / "hanging")
+    state_dir = write_state(arm, arm.base_state(), tmp_path / "run" / "fe" / "hanging")
     result = check_state_dirs([state_dir])[0]
     assert result["elbow_angle_deg"] == pytest.approx(arm.base_state().elbow_angle_deg)
     assert {r["muscle"] for r in result["bed_gaps"]} == {"biceps", "brachialis", "brachioradialis", "triceps", "anconeus"}
@@ -134,6 +134,36 @@ def test_the_coarse_hanging_arm_inside_test_agrees_with_the_winding_number(tmp_p
     written = json.loads(out.read_text())
     assert written["states"][0]["overlaps"] == json.loads(json.dumps(result["overlaps"]))
     assert "surface nodes of a body inside another" in run.output
+
+    # the run's anatomy stage measures the same state: its table row is the pair's deepest
+    from persival.evaluate.anatomy_run import measure_run
+
+    table = measure_run(tmp_path / "run")
+    row = next(r for r in table["rows"] if r["pair"] == "brachialis in biceps")
+    assert row["fe_mm"] == pytest.approx(counted["deepest_mm"]) and row["held_mm"] is None
+    assert (tmp_path / "run" / "anatomy" / "anatomy.md").is_file()
+    assert json.loads((tmp_path / "run" / "anatomy" / "states.json").read_text())["states"][0]["state"] == "hanging"
+
+
+def test_the_run_table_counts_a_pair_once_per_state_against_its_limit():
+    """Two states: the first has the pair both ways over the 2 mm limit and a bone pair (no limit),
+    the second a muscle-bone overlap under its 1 mm limit; so one pair-state over the limits."""
+    from persival.evaluate.anatomy_run import anatomy_table
+
+    def state(name, theta, overlaps):
+        return {"state": name, "elbow_angle_deg": theta, "overlaps": [
+            {"body": a, "inside": b, "nodes": 3, "of": 100, "deepest_mm": d} for a, b, d in overlaps],
+            "bed_gaps": [{"muscle": "triceps", "bed": ["humerus"], "largest_gap_mm": 4.0 + theta / 100, "at_fraction": 0.5}]}
+
+    fe = [state("hanging", 30.0, [("biceps", "brachialis", 3.0), ("brachialis", "biceps", 2.5), ("radius", "ulna", 5.0)])]
+    held = [state("held_out/0", 90.0, [("biceps", "humerus", 0.8)])]
+    table = anatomy_table(fe, held, "arm")
+    rows = {r["pair"]: r for r in table["rows"]}
+    assert table["pair_states_over_limit"] == 1 and table["states_within_limits"] == 1 and table["states"] == 2
+    assert rows["biceps in brachialis"]["over"] == "1/2" and rows["biceps in humerus"]["over"] == "0/2"
+    assert rows["radius in ulna"]["limit_mm"] is None and rows["radius in ulna"]["over"] == "-"
+    assert rows["biceps in humerus"]["fe_mm"] is None and rows["biceps in humerus"]["held_mm"] == 0.8
+    assert rows["triceps off its bed (humerus)"]["fe_mm"] == 4.3 and rows["triceps off its bed (humerus)"]["held_mm"] == 4.9
 
 
 def test_outlines_are_the_muscles_cross_sections_and_overlaps_are_refused_by_name():
