@@ -54,8 +54,10 @@ class TableSolver:
         self.arm = arm
         self.table = table
         self.moments = table.moment_table()
-        self.lo_deg, self.hi_deg = self.moments.finite_range_deg()
-        self._fine = np.arange(self.lo_deg, self.hi_deg + 1e-9, 0.25)
+        # every tabulated angle: a column that failed somewhere is NaN there, and a state's balance
+        # is searched where the columns it interpolates converged (equilibrium_angle)
+        angles = table.angles_deg
+        self._fine = np.arange(angles[0], angles[-1] + 1e-9, 0.25)
         self._level_moments = {m: self.moments.level_moments(m, self._fine) for m in MUSCLES}
 
     # ------------------------------------------------------------------ joint equilibrium on the table
@@ -71,19 +73,39 @@ class TableSolver:
         """The stable root of :meth:`residual` (sign + to -) nearest ``near_deg`` (default: the
         lowest), refined by Brent's method on the interpolated moments."""
         alpha = check_activation_vector(activations)
-        g = sum(np.array([np.interp(a, self.moments.levels, row) for row in self._level_moments[name]])
-                for name, a in zip(MUSCLES, alpha))
+        g = sum(self._at_level(name, a) for name, a in zip(MUSCLES, alpha))
         g = g + self.moments.gravity_moment(self._fine) + self.moments.passive_joint_moment(self._fine)
-        down = np.flatnonzero((g[:-1] > 0) & (g[1:] <= 0))
+        lo, hi = self._converged_span(g, near_deg)
+        inside = (self._fine >= lo) & (self._fine <= hi)
+        down = np.flatnonzero((g[:-1] > 0) & (g[1:] <= 0) & inside[:-1] & inside[1:])
         if not len(down):  # no stable root inside: the forearm turns past one end of the table
-            side = "below" if g[0] < 0 else "above"
+            side = "below" if g[inside][0] < 0 else "above"
             raise OutsideTableError(f"the equilibrium of activations {alpha.tolist()} lies {side} the tabulated "
-                                    f"angles {self.lo_deg:g} to {self.hi_deg:g} deg")
+                                    f"angles {lo:g} to {hi:g} deg (where the columns of these activations converged)")
         k = down[0] if near_deg is None else down[np.argmin(np.abs(self._fine[down] - near_deg))]
         a, b = self._fine[k], self._fine[k + 1]
         if g[k + 1] == 0:
             return float(b)
         return float(brentq(lambda t: float(self.residual(t, alpha)[0]), a, b, xtol=1e-10))
+
+    def _at_level(self, muscle: str, activation: float) -> np.ndarray:
+        """M_m(theta, a) on the fine grid, linear in a between the two bracketing levels only (a
+        level that failed at an angle makes only the activations it brackets NaN there)."""
+        j, v = _bracket(self.moments.levels, activation)
+        rows = self._level_moments[muscle]
+        return rows[:, j] if v == 0.0 else rows[:, j + 1] if v == 1.0 else (1 - v) * rows[:, j] + v * rows[:, j + 1]
+
+    def _converged_span(self, g: np.ndarray, near_deg: float | None) -> tuple[float, float]:
+        """The run of fine angles where g is finite that holds ``near_deg`` (or lies nearest it;
+        the widest run when None)."""
+        finite = np.isfinite(g)
+        if not finite.any():
+            raise OutsideTableError("no tabulated angle where the columns of these activations all converged")
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], finite.astype(int), [0]])))
+        runs = [(self._fine[a], self._fine[b - 1]) for a, b in zip(edges[::2], edges[1::2])]
+        if near_deg is None:
+            return max(runs, key=lambda r: r[1] - r[0])
+        return min(runs, key=lambda r: 0.0 if r[0] <= near_deg <= r[1] else min(abs(r[0] - near_deg), abs(r[1] - near_deg)))
 
     # ------------------------------------------------------------------ states from the table
     def guess(self, muscle: str, theta_deg: float, activation: float) -> MuscleState | None:

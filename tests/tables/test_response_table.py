@@ -108,6 +108,18 @@ def test_equilibrium_angle_solves_the_tabulated_moment_balance(solver):
     cut._level_moments = {m: solver.moments.level_moments(m, cut._fine) for m in MUSCLES}
     with pytest.raises(OutsideTableError, match="lies below the tabulated angles 40 to 160 deg"):
         cut.equilibrium_angle([0, 0, 0, 0, 0])
+    # a level that failed at some angles is NaN only for the activations it brackets: the
+    # brachialis' passive column cut off above 100 deg leaves the flexed and the hanging arm where
+    # they were, and a state that needs it beyond 100 deg is refused with the span it has
+    failed = copy.copy(solver)
+    rows = solver._level_moments["brachialis"].copy()
+    rows[solver._fine > 100.0, 0] = np.nan
+    failed._level_moments = {**solver._level_moments, "brachialis": rows}
+    for alpha in ([1, 1, 1, 0, 0], [0, 0, 0, 0, 0]):
+        assert failed.equilibrium_angle(alpha) == solver.equilibrium_angle(alpha)
+    assert solver.equilibrium_angle([1, 0, 1, 0, 0]) > 100.0
+    with pytest.raises(OutsideTableError, match=r"lies above the tabulated angles -?\d+ to 100 deg"):
+        failed.equilibrium_angle([1, 0, 1, 0, 0])
 
 
 def test_bad_activations_are_refused_before_any_work(solver):
