@@ -1,6 +1,6 @@
 """The anatomy of a run: bodies inside each other and muscles off their beds in the FE stage's
-states and the held-out campaign states (docs/arm_model.md, "Overlap between bodies"), as a
-stage artifact (``OUT/anatomy/anatomy.json``, every state) and a table of the report.
+states and the held-out campaign states (docs/arm_model.md, "Overlap between bodies"): every
+state in ``OUT/anatomy/states.json``, and a table of the report (``anatomy.json``, ``anatomy.md``).
 
 One row per pair of bodies that overlap anywhere: its limit (1 mm muscle-bone, 2 mm muscle-muscle,
 none bone-bone), the deepest penetration among the FE states and among the held-out states, and how
