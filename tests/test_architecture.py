@@ -14,7 +14,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "persival"
 STAGES = ("model", "tables", "campaign", "surrogate", "deploy", "evaluate")
-TOP = {"persival.pipeline", "persival.stages", "persival.cli", "persival.run_command"}
+TOP = {"persival.pipeline", "persival.stages", "persival.stages_arm", "persival.cli", "persival.run_command"}
 BOTTOM, ABOVE_ALL = -1, len(STAGES)
 # a lazily imported factory, e.g. "persival.campaign.analytic:AnalyticSimulator"
 LAZY_TARGET = re.compile(r"^(persival(?:\.\w+)+):\w+$")
