@@ -169,8 +169,7 @@ def anatomy(out: Path, config, console) -> dict:
 
     with console.status("anatomy: FE and held-out states"):
         table = measure_run(out, config.model)
-    worst = {r["pair"]: r[k] for r in table["rows"] if r.get("limit_mm") for k in ("fe_mm", "held_mm")
-             if r[k] is not None and r[k] > r["limit_mm"]}
+    over = sorted(r["pair"] for r in table["rows"] if r.get("limit_mm") and not r["over"].startswith("0/"))
     console.print(f"  {table['notes'][0]}; {out}/anatomy/anatomy.md")
     return {"states": table["states"], "pair_states_over_limit": table["pair_states_over_limit"],
-            "states_within_limits": table["states_within_limits"], "pairs_over_limit": sorted(worst)}
+            "states_within_limits": table["states_within_limits"], "pairs_over_limit": over}

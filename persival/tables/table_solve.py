@@ -73,7 +73,9 @@ class TableSolver:
         """The stable root of :meth:`residual` (sign + to -) nearest ``near_deg`` (default: the
         lowest), refined by Brent's method on the interpolated moments."""
         alpha = check_activation_vector(activations)
-        g = sum(self._at_level(name, a) for name, a in zip(MUSCLES, alpha))
+        # linear in a: np.interp reads only the two levels that bracket a (a NaN elsewhere stays out)
+        g = sum(np.array([np.interp(a, self.moments.levels, row) for row in self._level_moments[name]])
+                for name, a in zip(MUSCLES, alpha))
         g = g + self.moments.gravity_moment(self._fine) + self.moments.passive_joint_moment(self._fine)
         lo, hi = self._converged_span(g, near_deg)
         inside = (self._fine >= lo) & (self._fine <= hi)
@@ -87,13 +89,6 @@ class TableSolver:
         if g[k + 1] == 0:
             return float(b)
         return float(brentq(lambda t: float(self.residual(t, alpha)[0]), a, b, xtol=1e-10))
-
-    def _at_level(self, muscle: str, activation: float) -> np.ndarray:
-        """M_m(theta, a) on the fine grid, linear in a between the two bracketing levels only (a
-        level that failed at an angle makes only the activations it brackets NaN there)."""
-        j, v = _bracket(self.moments.levels, activation)
-        rows = self._level_moments[muscle]
-        return rows[:, j] if v == 0.0 else rows[:, j + 1] if v == 1.0 else (1 - v) * rows[:, j] + v * rows[:, j + 1]
 
     def _converged_span(self, g: np.ndarray, near_deg: float | None) -> tuple[float, float]:
         """The run of fine angles where g is finite that holds ``near_deg`` (or lies nearest it;
