@@ -5,18 +5,21 @@
     3 fe        OUT/fe/        three FE equilibria of the arm (state.json + VTU) and arm.png
     4 campaign  OUT/campaign/  campaign.zarr (sparse-grid design) + held_out.zarr (random states)
     5 anatomy   OUT/anatomy/   bodies inside each other, muscles off their beds: FE and held-out states
-    6 sg        OUT/sg/        B-spline SG of all five muscles' surfaces + the elbow angle
-    7 inverse   OUT/inverse/   activation_model.json (Theta -> alpha_opt) + plot
-    8 motion    OUT/motion/    (angle, velocity, acceleration, load) -> alpha, from the FE moments
-    9 data      OUT/data/      SG training data (alpha_opt(Theta) and random alpha)
-   10 train     OUT/networks/  pod/ (all muscles) and paper/ (the paper's net, biceps)
-   11 export    OUT/export/    ONNX models + metadata.json (docs/deployment.md)
-   12 evaluate  OUT/evaluate/  the paper's tables and figures
-   13 report    OUT/report/    index.html + results.json
+    6 structured OUT/structured/ per-muscle shape and moment models from the tables: the deployed model
+    7 sg        OUT/sg/        B-spline SG of all five muscles' surfaces + the elbow angle
+    8 inverse   OUT/inverse/   activation_model.json (Theta -> alpha_opt) + plot
+    9 motion    OUT/motion/    (angle, velocity, acceleration, load) -> alpha, from the FE moments
+   10 data      OUT/data/      SG training data (alpha_opt(Theta) and random alpha)
+   11 train     OUT/networks/  pod/ (all muscles) and paper/ (the paper's net, biceps)
+   12 export    OUT/export/    ONNX models + metadata.json (docs/deployment.md)
+   13 evaluate  OUT/evaluate/  the paper's tables and figures
+   14 report    OUT/report/    index.html + results.json
 
 Resumable stage by stage: every stage leaves ``OUT/<stage>/stage.json`` with the digest of its
 inputs (its own settings plus the digests of the stages it reads); a stage whose digest is
-unchanged is skipped. The campaign's simulator is named everywhere its numbers appear.
+unchanged is skipped. An interrupted campaign stage (killed, or stopped by states that failed)
+is resumed where it stopped by the next run with the same settings. The campaign's simulator is
+named everywhere its numbers appear.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ from pathlib import Path
 
 from persival import stages
 
-__all__ = ["RunConfig", "run", "STAGES"]
+__all__ = ["RunConfig", "StageIncomplete", "run", "STAGES"]
 
 
 @dataclass
@@ -53,6 +56,14 @@ class RunConfig:
     seed: int = 0
     fe_states: bool = True  # the three showcase FE equilibria
     bench: bool = True  # the speed table in the evaluate stage
+    # seconds per campaign state before it is recorded as failed (None: no limit). Not in any
+    # digest: it changes whether a state finishes, never what a finished state holds.
+    state_timeout_s: float | None = 900.0
+
+
+class StageIncomplete(RuntimeError):
+    """A stage could not finish (e.g. campaign states that failed); what it computed is kept and
+    the next run with the same settings resumes it."""
 
 
 #: (name, what it does, the stages whose artifacts it reads)
@@ -79,6 +90,10 @@ OPTIONAL_SETTINGS = {"model_hash"}
 
 #: stages whose folder is not named after them
 FOLDERS = {"train": "networks"}
+
+#: stages that resume what an interrupted run of theirs left (the campaign's stores resume state
+#: by state and refuse another design or simulator); every other stage starts from an empty folder
+RESUMABLE = {"campaign"}
 
 
 def _digest(obj) -> str:
@@ -109,15 +124,18 @@ def run(out: str | Path, config: RunConfig | None = None, console=None) -> dict:
         folder = out / FOLDERS.get(name, name)
         inputs = _stage_inputs(name, config, done)
         digest = _digest(inputs)
-        marker = folder / "stage.json"
+        marker, started_marker = folder / "stage.json", folder / "started.json"
         if marker.exists() and json.loads(marker.read_text()).get("digest") == digest:
             done[name] = json.loads(marker.read_text())
             console.rule(f"{k}/{len(active)} {name}: {what} [dim](unchanged, skipped)[/dim]")
             continue
-        console.rule(f"{k}/{len(active)} {name}: {what}")
-        if folder.exists():
+        resume = (name in RESUMABLE and not marker.exists() and started_marker.exists()
+                  and json.loads(started_marker.read_text()).get("digest") == digest)
+        console.rule(f"{k}/{len(active)} {name}: {what}" + (" [dim](resumed)[/dim]" if resume else ""))
+        if folder.exists() and not resume:
             shutil.rmtree(folder)  # inputs changed: stale artifacts must not mix with new ones
-        folder.mkdir(parents=True)
+        folder.mkdir(parents=True, exist_ok=True)
+        started_marker.write_text(json.dumps({"digest": digest}))
         t0 = time.perf_counter()
         summary = stages.RUNNERS[name](out, config, console)
         record = {"stage": name, "digest": digest, "inputs": inputs, "wall_time_s": time.perf_counter() - t0,

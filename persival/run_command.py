@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from persival.cli_errors import check_output_dir, user_errors
+from persival.cli_errors import check_output_dir, fail, user_errors
 from persival.model.defaults import profiles_help, resolve_model_path
 
 
@@ -32,10 +32,13 @@ def register(app: typer.Typer) -> None:
         pod_epochs: int = typer.Option(100, "--pod-epochs", min=1, help="POD network: epochs per fold (5 folds)."),
         paper_epochs: int = typer.Option(8, "--paper-epochs", min=1, help="Paper network: epochs (1 fold; the paper: 5 x 400)."),
         fe_states: bool = typer.Option(True, "--fe-states/--no-fe-states", help="Solve the three showcase FE states."),
+        state_timeout: float = typer.Option(
+            900.0, "--state-timeout", min=0.0, help="Seconds per campaign state before it is recorded as failed "
+            "(0: no limit). A run with failed sparse-grid states stops after the campaign and resumes from it."),
     ) -> None:
         """End to end: model -> FE -> campaign -> anatomy -> SG -> inverse -> data -> train -> export -> evaluate -> report."""
         from persival.model.arm_body import ArmBody
-        from persival.pipeline import RunConfig
+        from persival.pipeline import RunConfig, StageIncomplete
         from persival.pipeline import run as run_pipeline
 
         with user_errors():  # before anything is written
@@ -56,8 +59,13 @@ def register(app: typer.Typer) -> None:
                                campaign_store=None if campaign_store is None else str(campaign_store.resolve()),
                                held_out_store=None if held_out_store is None else str(held_out_store.resolve()),
                                moment_table=None if moment_table is None else str(moment_table.resolve()),
-                               samples=samples, pod_epochs=pod_epochs, paper_epochs=paper_epochs, fe_states=fe_states)
+                               samples=samples, pod_epochs=pod_epochs, paper_epochs=paper_epochs, fe_states=fe_states,
+                               state_timeout_s=state_timeout or None)
         # A user error half-way (e.g. a bad store) removes an output folder this run created;
-        # an internal error keeps what was written, for --debug.
-        with user_errors(out=out):
-            run_pipeline(out, config)
+        # an internal error keeps what was written, for --debug; a stage that could not finish
+        # keeps it too, for the next run to resume.
+        try:
+            with user_errors(out=out):
+                run_pipeline(out, config)
+        except StageIncomplete as exc:
+            fail(str(exc))

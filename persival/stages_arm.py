@@ -140,12 +140,19 @@ def campaign(out: Path, config, console) -> dict:
                                 ("held_out", config.held_out_store, Design.random(config.held_out, seed=config.seed + 1))):
         path = folder / f"{name}.zarr"
         if given is not None:  # reuse: a symbolic link keeps the layout without copying the states
-            path.symlink_to(Path(given).resolve(), target_is_directory=True)
+            if not path.is_symlink():  # a resumed stage has it already
+                path.symlink_to(Path(given).resolve(), target_is_directory=True)
         else:
-            console.print(f"  {name}: {len(design)} states of the {config.simulator} simulator")
-            run_campaign(path, design, spec, scheduler=INLINE if config.simulator == "analytic" else None, progress=True)
+            console.print(f"  {name}: {len(design)} states of the {config.simulator} simulator"
+                          + (" (resumed)" if path.exists() else ""))
+            # retry_failed: a resumed stage retries what failed before (with the run's time limit,
+            # perhaps a larger one); a new store has nothing failed
+            run_campaign(path, design, spec, scheduler=INLINE if config.simulator == "analytic" else None,
+                         timeout_s=config.state_timeout_s, retry_failed=True, progress=True)
         with CampaignStore.open(path) as store:
             stores[name] = {"path": str(path), **store.summary()}
+        if name == "campaign":
+            _check_complete(stores[name], path)
     if config.simulator == "arm":  # the table-only path on the same activations: a row of the evaluation
         path = folder / "held_out_table_only.zarr"
         with CampaignStore.open(folder / "held_out.zarr") as held:
@@ -157,6 +164,19 @@ def campaign(out: Path, config, console) -> dict:
     for name, s in stores.items():
         console.print(f"  {name}: {s['done']} done, {s['failed']} failed, simulator {s['simulator']}")
     return stores
+
+
+def _check_complete(summary: dict, path: Path) -> None:
+    """The sparse grid needs every one of its states: stop the run, keeping the store, when some failed."""
+    from persival.pipeline import StageIncomplete
+
+    if summary["failed"] or summary["missing"]:
+        reasons = "; ".join(f"{count} x {reason}" for reason, count in summary["failure_reasons"].items())
+        raise StageIncomplete(
+            f"{summary['failed']} of the sparse grid's {summary['total']} states failed ({reasons}) and "
+            f"{summary['missing']} are missing; the sparse grid needs all of them. The same `persival run` "
+            f"again (with a larger --state-timeout for timeouts) resumes the campaign and retries them; "
+            f"so does `persival campaign run --store {path} --retry-failed`")
 
 
 def anatomy(out: Path, config, console) -> dict:

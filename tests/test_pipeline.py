@@ -50,3 +50,43 @@ def test_the_viewer_screenshot_is_skipped_with_a_note_where_there_is_no_browser(
     monkeypatch.setattr(bench_viewer, "run_viewer_bench", no_browser)
     skipped = stages._viewer_screenshot(tmp_path, Console(quiet=True))
     assert "apt-get install chromium" in skipped["viewer screenshot"]
+
+
+@pytest.mark.slow
+def test_a_campaign_with_failed_states_stops_the_run_and_the_next_run_resumes_it(tmp_path, monkeypatch):
+    """Failed sparse-grid states stop `persival run` after the campaign with what to do; the store is
+    kept, and the next run solves only the states that failed, then goes on."""
+    from rich.console import Console
+
+    import persival.pipeline as pipeline
+    from persival.campaign.analytic import AnalyticSimulator
+    from persival.campaign.store import CampaignStore
+
+    monkeypatch.setattr(pipeline, "STAGES", [s for s in pipeline.STAGES if s[0] in ("model", "tables", "campaign")])
+    solved, stalls = [], {"biceps at 1": True}
+    simulate = AnalyticSimulator.simulate
+
+    def biceps_at_one_fails(self, activations, warm_start=None, attempt=0):
+        if activations[0] == 1.0 and stalls["biceps at 1"]:
+            raise RuntimeError("Newton stalled")
+        solved.append(tuple(activations))
+        return simulate(self, activations, warm_start, attempt)
+
+    monkeypatch.setattr(AnalyticSimulator, "simulate", biceps_at_one_fails)
+    config = RunConfig(simulator="analytic", held_out=4, fe_states=False, bench=False)
+    with pytest.raises(pipeline.StageIncomplete, match=r"of the sparse grid's 243 states failed \(.*Newton stalled"):
+        run(tmp_path, config, Console(quiet=True))
+    store_path = tmp_path / "campaign" / "campaign.zarr"
+    with CampaignStore.open(store_path) as store:
+        first = store.summary()
+    assert first["failed"] > 0 and first["done"] + first["failed"] == 243
+    assert not (tmp_path / "campaign" / "stage.json").exists()
+
+    solved.clear()
+    stalls["biceps at 1"] = False
+    console = Console(record=True, width=120)
+    done = run(tmp_path, config, console)
+    assert "campaign: sparse-grid campaign + random held-out states (resumed)" in console.export_text()
+    assert done["campaign"]["summary"]["campaign"]["done"] == 243
+    assert sum(a[0] == 1.0 for a in solved) == first["failed"]  # the failed ones, nothing solved twice
+    assert len(solved) == first["failed"] + 4  # and the held-out states, which the first run never reached
