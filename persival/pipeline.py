@@ -135,7 +135,8 @@ def run(out: str | Path, config: RunConfig | None = None, console=None) -> dict:
         if folder.exists() and not resume:
             shutil.rmtree(folder)  # inputs changed: stale artifacts must not mix with new ones
         folder.mkdir(parents=True, exist_ok=True)
-        started_marker.write_text(json.dumps({"digest": digest}))
+        if name in RESUMABLE:  # other stages want their folder empty
+            started_marker.write_text(json.dumps({"digest": digest}))
         t0 = time.perf_counter()
         summary = stages.RUNNERS[name](out, config, console)
         record = {"stage": name, "digest": digest, "inputs": inputs, "wall_time_s": time.perf_counter() - t0,

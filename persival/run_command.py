@@ -3,6 +3,7 @@ drives all of them (persival.pipeline); no stage's commands.py imports the pipel
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import typer
@@ -61,11 +62,16 @@ def register(app: typer.Typer) -> None:
                                moment_table=None if moment_table is None else str(moment_table.resolve()),
                                samples=samples, pod_epochs=pod_epochs, paper_epochs=paper_epochs, fe_states=fe_states,
                                state_timeout_s=state_timeout or None)
-        # A user error half-way (e.g. a bad store) removes an output folder this run created;
-        # an internal error keeps what was written, for --debug; a stage that could not finish
-        # keeps it too, for the next run to resume.
+        # A user error before any stage finished removes an output folder this run created; after
+        # one, what finished stays, as after an internal error (for --debug) or a stage that could
+        # not finish: the next run resumes from it.
+        created = not out.exists()
         try:
-            with user_errors(out=out):
+            with user_errors():
                 run_pipeline(out, config)
         except StageIncomplete as exc:
             fail(str(exc))
+        except typer.Exit as exc:
+            if exc.exit_code and created and not any(out.glob("*/stage.json")):
+                shutil.rmtree(out, ignore_errors=True)
+            raise

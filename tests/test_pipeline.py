@@ -90,3 +90,28 @@ def test_a_campaign_with_failed_states_stops_the_run_and_the_next_run_resumes_it
     assert done["campaign"]["summary"]["campaign"]["done"] == 243
     assert sum(a[0] == 1.0 for a in solved) == first["failed"]  # the failed ones, nothing solved twice
     assert len(solved) == first["failed"] + 4  # and the held-out states, which the first run never reached
+
+
+def test_a_user_error_half_way_keeps_the_stages_that_finished(tmp_path, monkeypatch):
+    """`persival run`: a user error in the first stage leaves nothing behind; one in a later stage
+    keeps the stages before it (the next run resumes from them) and is reported as a user error."""
+    from typer.testing import CliRunner
+
+    import persival.pipeline as pipeline
+    from persival import stages
+    from persival.cli import app
+
+    monkeypatch.setattr(pipeline, "STAGES", [s for s in pipeline.STAGES if s[0] in ("model", "tables")])
+
+    def bad_table(out, config, console):
+        raise ValueError("no table here")
+
+    for failing, kept in (("model", False), ("tables", True)):
+        monkeypatch.setattr(stages, "RUNNERS", {**stages.RUNNERS, "model": lambda out, config, console: {},
+                                                failing: bad_table})
+        out = tmp_path / failing
+        result = CliRunner().invoke(app, ["run", "--simulator", "analytic", "--out", str(out)])
+        assert result.exit_code == 2 and "no table here" in result.output
+        assert out.exists() is kept
+        if kept:
+            assert (out / "model" / "stage.json").exists() and not (out / "tables" / "stage.json").exists()
