@@ -105,6 +105,30 @@ def test_moments_are_the_tables_at_their_grid_and_the_fe_root_nearby(fitted, tab
     assert np.all(np.diff(angle) > 0) and 60 < angle[0] < angle[1] <= 160 + 1e-9
 
 
+def test_slopes_of_a_smooth_column_are_kept_and_a_wall_s_kink_does_not_overshoot():
+    """The FE slopes where they agree with the tabulated values (a smooth moment: every one kept);
+    a column with a jump between 5 and 10 deg and a slope of -440 N mm/deg beside a flat run (the
+    walls arm's biceps at a = 1/4) gets the monotone slope there, and its Hermite interpolant stays
+    within the values, where the FE slopes overshoot by more than 400 N mm."""
+    from scipy.interpolate import CubicHermiteSpline
+
+    from persival.surrogate.structured.moment_model import consistent_slopes
+
+    angles = np.arange(-10.0, 190.0, 5.0)
+    smooth = 2000.0 * np.sin(np.radians(angles) * 0.9 + 0.3)[None, :, None]
+    exact = (2000.0 * 0.9 * np.pi / 180.0 * np.cos(np.radians(angles) * 0.9 + 0.3))[None, :, None]
+    assert np.array_equal(consistent_slopes(angles, smooth, exact), exact)
+
+    walls = np.array([813.0, 790.0, 767.0, 745.0, 2499.0, 2498.0, 2485.0, 2463.0, 2452.0, 2434.0])
+    fe_slopes = np.array([-5.0, -5.0, -4.0, -4.0, -440.0, -745.0, -485.0, -611.0, -989.0, -633.0])
+    kept = consistent_slopes(angles[:10], walls[None, :, None], fe_slopes[None, :, None])[0, :, 0]
+    assert np.array_equal(kept[:3], fe_slopes[:3])  # where the column is smooth
+    fine = np.linspace(10.0, 35.0, 501)
+    assert CubicHermiteSpline(angles[:10], walls, fe_slopes)(fine).min() < 2499.0 - 400.0
+    limited = CubicHermiteSpline(angles[:10], walls, kept)(fine)
+    assert limited.min() >= walls[4:].min() - 1e-9 and limited.max() <= walls[4:].max() + 1e-9
+
+
 def test_in_graph_equilibrium_matches_a_scipy_root_of_the_same_model(fitted):
     rng = np.random.default_rng(7)
     alpha = rng.uniform(0.0, 1.0, (40, 5))

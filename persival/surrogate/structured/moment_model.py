@@ -2,7 +2,8 @@
 
 Each muscle's hinge moment ``M_m(theta, a_m)`` is interpolated from its FE response table:
 cubic Hermite in theta through the tabulated values and slopes dM/dtheta (the FE path's own
-interpolation), an interpolating cubic spline in the activation. Gravity (forearm, hand and the
+interpolation, with slopes that disagree with the values replaced: :func:`consistent_slopes`),
+an interpolating cubic spline in the activation. Gravity (forearm, hand and the
 load in the hand) and the passive joint moment are analytic; they join the balance through
 the same Hermite interpolation of their exact values and slopes at the table angles (its error,
 below 1e-3 N mm on 5-degree steps, moves the root by less than 1e-5 deg), so that on every table
@@ -21,7 +22,7 @@ from scipy.optimize import brentq
 from persival.surrogate.structured.cardinal import hermite_weights, spline_weights
 from persival.vocabulary import MUSCLES
 
-__all__ = ["ExternalMoments", "MomentModel", "ROOT_GRID_DEG", "NEWTON_SLOPE_CAP", "NEWTON_STEPS"]
+__all__ = ["ExternalMoments", "MomentModel", "consistent_slopes", "ROOT_GRID_DEG", "NEWTON_SLOPE_CAP", "NEWTON_STEPS"]
 
 ROOT_GRID_DEG = 0.5  # largest spacing of the sign scan that brackets the stable root
 # Newton steps on the bracket's cubic after regula falsi: the start is within 7e-3 deg, the
@@ -84,7 +85,8 @@ class MomentModel:
         if not (np.isfinite(moments).all() and np.isfinite(slopes).all()):
             raise ValueError("the moment table has failed solves (NaN) inside the angles given: cut it to its finite range")
         # (5, 2 n_t, n_a): values, then slopes per degree, for the Hermite weights in theta
-        self.data = np.concatenate([moments, slopes * (np.pi / 180.0)], axis=1)
+        self.data = np.concatenate([moments, consistent_slopes(self.angles_deg, moments, slopes * (np.pi / 180.0))],
+                                   axis=1)
         self.external = external
         t = self.angles_deg
         # the external moments' Hermite data: at no load, and per kg in the hand
@@ -181,10 +183,34 @@ class MomentModel:
     @classmethod
     def from_arrays(cls, arrays: dict, parameters: dict) -> MomentModel:
         n_t = len(arrays["angles_deg"])
-        data = arrays["moment_data"]
+        data = arrays["moment_data"]  # slopes checked when fitted: consistent_slopes keeps every one of them
         external = ExternalMoments(**{**parameters["external"], "limits_deg": tuple(parameters["external"]["limits_deg"])})
         return cls(arrays["angles_deg"], arrays["levels"], data[:, :n_t], data[:, n_t:] * (180.0 / np.pi), external,
                    parameters["near_deg"])
+
+
+def consistent_slopes(angles_deg: np.ndarray, values: np.ndarray, slopes: np.ndarray) -> np.ndarray:
+    """The FE slopes (axis 1: the angles) where they agree with the tabulated values, else the
+    monotone (PCHIP) slopes of those values (docs/theory.md 7.7, "Slopes").
+
+    A slope agrees when the Hermite pieces on either side stay in the Fritsch-Carlson region of
+    the neighbouring secants s_l and s_r: of their sign and at most 3 min(|s_l|, |s_r|) where they
+    share one, at most max(|s_l|, |s_r|) where they do not (an extremum between them). Where a
+    muscle slides along a wall its contact set changes between table angles and the moment has
+    kinks: its slope at a table angle says little about the next 5 degrees, and a Hermite piece
+    through it overshoots by hundreds of N mm.
+    """
+    from scipy.interpolate import PchipInterpolator
+
+    h = np.diff(angles_deg)[None, :, None]
+    secant = np.diff(values, axis=1) / h
+    left = np.concatenate([secant[:, :1], secant], axis=1)  # at the ends: the one secant twice
+    right = np.concatenate([secant, secant[:, -1:]], axis=1)
+    same_sign = left * right > 0
+    agrees = np.where(same_sign, (slopes * left >= 0) & (np.abs(slopes) <= 3.0 * np.minimum(np.abs(left), np.abs(right))),
+                      np.abs(slopes) <= np.maximum(np.abs(left), np.abs(right)))
+    monotone = PchipInterpolator(angles_deg, values, axis=1).derivative()(angles_deg)
+    return np.where(agrees, slopes, monotone)
 
 
 def _scan_grid(knots: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
