@@ -33,7 +33,7 @@ from pathlib import Path
 
 from persival import stages
 
-__all__ = ["RunConfig", "StageIncomplete", "run", "STAGES"]
+__all__ = ["RunConfig", "run", "STAGES"]
 
 
 @dataclass
@@ -59,11 +59,6 @@ class RunConfig:
     # seconds per campaign state before it is recorded as failed (None: no limit). Not in any
     # digest: it changes whether a state finishes, never what a finished state holds.
     state_timeout_s: float | None = 900.0
-
-
-class StageIncomplete(RuntimeError):
-    """A stage could not finish (e.g. campaign states that failed); what it computed is kept and
-    the next run with the same settings resumes it."""
 
 
 #: (name, what it does, the stages whose artifacts it reads)

@@ -38,8 +38,9 @@ def register(app: typer.Typer) -> None:
             "(0: no limit). A run with failed sparse-grid states stops after the campaign and resumes from it."),
     ) -> None:
         """End to end: model -> FE -> campaign -> anatomy -> SG -> inverse -> data -> train -> export -> evaluate -> report."""
+        from persival.campaign.runner import CampaignIncomplete
         from persival.model.arm_body import ArmBody
-        from persival.pipeline import RunConfig, StageIncomplete
+        from persival.pipeline import RunConfig
         from persival.pipeline import run as run_pipeline
 
         with user_errors():  # before anything is written
@@ -69,7 +70,7 @@ def register(app: typer.Typer) -> None:
         try:
             with user_errors():
                 run_pipeline(out, config)
-        except StageIncomplete as exc:
+        except CampaignIncomplete as exc:
             fail(str(exc))
         except typer.Exit as exc:
             if exc.exit_code and created and not any(out.glob("*/stage.json")):

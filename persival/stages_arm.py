@@ -168,11 +168,11 @@ def campaign(out: Path, config, console) -> dict:
 
 def _check_complete(summary: dict, path: Path) -> None:
     """The sparse grid needs every one of its states: stop the run, keeping the store, when some failed."""
-    from persival.pipeline import StageIncomplete
+    from persival.campaign.runner import CampaignIncomplete
 
     if summary["failed"] or summary["missing"]:
         reasons = "; ".join(f"{count} x {reason}" for reason, count in summary["failure_reasons"].items())
-        raise StageIncomplete(
+        raise CampaignIncomplete(
             f"{summary['failed']} of the sparse grid's {summary['total']} states failed ({reasons}) and "
             f"{summary['missing']} are missing; the sparse grid needs all of them. The same `persival run` "
             f"again (with a larger --state-timeout for timeouts) resumes the campaign and retries them; "

@@ -60,6 +60,7 @@ def test_a_campaign_with_failed_states_stops_the_run_and_the_next_run_resumes_it
 
     import persival.pipeline as pipeline
     from persival.campaign.analytic import AnalyticSimulator
+    from persival.campaign.runner import CampaignIncomplete
     from persival.campaign.store import CampaignStore
 
     monkeypatch.setattr(pipeline, "STAGES", [s for s in pipeline.STAGES if s[0] in ("model", "tables", "campaign")])
@@ -74,7 +75,7 @@ def test_a_campaign_with_failed_states_stops_the_run_and_the_next_run_resumes_it
 
     monkeypatch.setattr(AnalyticSimulator, "simulate", biceps_at_one_fails)
     config = RunConfig(simulator="analytic", held_out=4, fe_states=False, bench=False)
-    with pytest.raises(pipeline.StageIncomplete, match=r"of the sparse grid's 243 states failed \(.*Newton stalled"):
+    with pytest.raises(CampaignIncomplete, match=r"of the sparse grid's 243 states failed \(.*Newton stalled"):
         run(tmp_path, config, Console(quiet=True))
     store_path = tmp_path / "campaign" / "campaign.zarr"
     with CampaignStore.open(store_path) as store:

@@ -40,13 +40,18 @@ from persival.campaign.simulator import SimulatorSpec, cached_simulator, simulat
 from persival.campaign.store import CampaignStore
 from persival.cluster import local_cluster
 
-__all__ = ["run_campaign", "INLINE"]
+__all__ = ["run_campaign", "CampaignIncomplete", "INLINE"]
 
 INLINE = "inline"
 # Driver-side backstop beyond the per-attempt limits (worker start-up, queueing, cancel grace).
 _BACKSTOP_GRACE_S = 60.0
 _POLL_S = 0.5
 log = logging.getLogger(__name__)
+
+
+class CampaignIncomplete(RuntimeError):
+    """A campaign that must be complete (a sparse grid needs every state) has failed or missing
+    states; its store is kept, and running it again retries them."""
 
 
 def _check_args(design, spec, timeout_s, max_attempts, n_workers, chunk_size) -> None:
