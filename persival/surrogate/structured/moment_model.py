@@ -85,8 +85,7 @@ class MomentModel:
         if not (np.isfinite(moments).all() and np.isfinite(slopes).all()):
             raise ValueError("the moment table has failed solves (NaN) inside the angles given: cut it to its finite range")
         # (5, 2 n_t, n_a): values, then slopes per degree, for the Hermite weights in theta
-        self.data = np.concatenate([moments, consistent_slopes(self.angles_deg, moments, slopes * (np.pi / 180.0))],
-                                   axis=1)
+        self.data = np.concatenate([moments, slopes * (np.pi / 180.0)], axis=1)
         self.external = external
         t = self.angles_deg
         # the external moments' Hermite data: at no load, and per kg in the hand
@@ -100,11 +99,13 @@ class MomentModel:
 
     @classmethod
     def from_table(cls, table, spec, near_deg: float) -> MomentModel:
-        """From a :class:`~persival.tables.moment_table.MomentTable`, cut to its finite range."""
+        """From a :class:`~persival.tables.moment_table.MomentTable`, cut to its finite range, its
+        slopes checked against its values (:func:`consistent_slopes`)."""
         lo, hi = table.finite_range_deg()
         keep = (table.angles_deg >= lo) & (table.angles_deg <= hi)
-        return cls(table.angles_deg[keep], table.levels, table.moments[:, keep], table.moment_slopes[:, keep],
-                   ExternalMoments.of_arm(spec), near_deg)
+        angles, moments = table.angles_deg[keep], table.moments[:, keep]
+        slopes = consistent_slopes(np.radians(angles), moments, table.moment_slopes[:, keep])  # N mm per radian
+        return cls(angles, table.levels, moments, slopes, ExternalMoments.of_arm(spec), near_deg)
 
     @property
     def range_deg(self) -> tuple[float, float]:
@@ -183,15 +184,15 @@ class MomentModel:
     @classmethod
     def from_arrays(cls, arrays: dict, parameters: dict) -> MomentModel:
         n_t = len(arrays["angles_deg"])
-        data = arrays["moment_data"]  # slopes checked when fitted: consistent_slopes keeps every one of them
+        data = arrays["moment_data"]
         external = ExternalMoments(**{**parameters["external"], "limits_deg": tuple(parameters["external"]["limits_deg"])})
         return cls(arrays["angles_deg"], arrays["levels"], data[:, :n_t], data[:, n_t:] * (180.0 / np.pi), external,
                    parameters["near_deg"])
 
 
-def consistent_slopes(angles_deg: np.ndarray, values: np.ndarray, slopes: np.ndarray) -> np.ndarray:
-    """The FE slopes (axis 1: the angles) where they agree with the tabulated values, else the
-    monotone (PCHIP) slopes of those values (docs/theory.md 7.7, "Slopes").
+def consistent_slopes(angles: np.ndarray, values: np.ndarray, slopes: np.ndarray) -> np.ndarray:
+    """The FE slopes (axis 1: the angles; per unit of ``angles``) where they agree with the
+    tabulated values, else the monotone (PCHIP) slopes of those values (docs/theory.md 7.7, "Slopes").
 
     A slope agrees when the Hermite pieces on either side stay in the Fritsch-Carlson region of
     the neighbouring secants s_l and s_r: of their sign and at most 3 min(|s_l|, |s_r|) where they
@@ -202,14 +203,14 @@ def consistent_slopes(angles_deg: np.ndarray, values: np.ndarray, slopes: np.nda
     """
     from scipy.interpolate import PchipInterpolator
 
-    h = np.diff(angles_deg)[None, :, None]
+    h = np.diff(angles)[None, :, None]
     secant = np.diff(values, axis=1) / h
     left = np.concatenate([secant[:, :1], secant], axis=1)  # at the ends: the one secant twice
     right = np.concatenate([secant, secant[:, -1:]], axis=1)
     same_sign = left * right > 0
     agrees = np.where(same_sign, (slopes * left >= 0) & (np.abs(slopes) <= 3.0 * np.minimum(np.abs(left), np.abs(right))),
                       np.abs(slopes) <= np.maximum(np.abs(left), np.abs(right)))
-    monotone = PchipInterpolator(angles_deg, values, axis=1).derivative()(angles_deg)
+    monotone = PchipInterpolator(angles, values, axis=1).derivative()(angles)
     return np.where(agrees, slopes, monotone)
 
 
