@@ -1,6 +1,7 @@
 """Writing solved arm states: state.json plus VTU files of every muscle and bone (ParaView).
 
-The bones are written with their shapes (persival.model.bone_shapes); contact sees capsules.
+The bones are written with their shapes (persival.model.bone_shapes), whatever the muscles touch
+(their capsules, or these shapes with ``[contact] bone_surfaces``).
 
 A state directory is written into a temporary sibling and renamed into place, so a failed
 or interrupted write leaves nothing half-done.

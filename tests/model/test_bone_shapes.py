@@ -111,3 +111,26 @@ def test_a_model_file_sets_the_shape_and_keeps_its_defaults(tmp_path):
     custom.write_text(text.replace(marker, marker + '[bones.shape]\nkind = "femur"\n'))
     with pytest.raises(ModelFileError, match="bones.0.shape"):
         load_model_file(custom)
+
+
+@pytest.mark.parametrize("theta", [0.0, 90.0])
+def test_the_viewer_skeleton_draws_the_shaped_bones_where_the_fe_states_write_them(arm, theta):
+    """The export's skeleton (docs/deployment.md) holds the shaped surfaces at 0 deg; turned by
+    its own hinge formula they land on the bones the FE states are written with (output.py)."""
+    from persival.campaign.skeleton import skeleton_for
+    from persival.model.output import bone_surfaces
+    from persival.model.rotations import rotation_about
+
+    skeleton = skeleton_for("arm", {})
+    centre, axis = np.array(skeleton["hinge"]["centre"]), np.array(skeleton["hinge"]["axis"])
+    written = bone_surfaces(arm, theta)
+    assert [b["name"] for b in skeleton["bones"]] == list(written)
+    for bone in skeleton["bones"]:
+        points, triangles = np.array(bone["points"]), np.array(bone["triangles"])
+        if bone["segment"] == "forearm":
+            points = centre + (points - centre) @ rotation_about(axis, theta).T
+        assert np.array_equal(triangles, written[bone["name"]][1]), bone["name"]
+        assert np.abs(points - written[bone["name"]][0]).max() < 0.01, bone["name"]
+    humerus = np.array(skeleton["bones"][0]["points"])
+    # the epicondyles: the distal humerus is far wider than its shaft (a tube would be 20 mm)
+    assert np.ptp(humerus[humerus[:, 2] < 20.0, 0]) > 50.0
