@@ -4,7 +4,8 @@ Unknowns are the displacements of the nodes not held by a constraint. A load fac
 from 0 to 1; activation and prescribed displacements are interpolated along it
 (continuation, docs/theory.md, 2.3). Each step is solved by Newton's method with the consistent tangent;
 the step is halved when Newton fails (divergence, an inverted element, a singular tangent)
-and grows again after easy steps.
+and grows again after easy steps. The linear algebra on the free DOFs (factorizations, their
+reuse, the condensed response) is persival.model.free_dofs.
 """
 
 from __future__ import annotations
@@ -16,9 +17,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from persival.model.assembly import InvertedElementError, MaterialField, Tet10Assembler, symmetric_matvec
+from persival.model.assembly import InvertedElementError, MaterialField, Tet10Assembler
 from persival.model.constraints import Dirichlet, Hinge
-from persival.model.linear_solver import SingularMatrixError, SparseSymmetricSolver
+from persival.model.free_dofs import FreeDofs
+from persival.model.linear_solver import SingularMatrixError
 from persival.model.mesh import Tet10Mesh
 
 log = logging.getLogger(__name__)
@@ -172,20 +174,9 @@ class QuasiStaticSolver:
             raise ValueError("at most one free hinge is supported")
         self.hinge: Hinge | None = free_hinges[0] if free_hinges else None
         self.constrained = constrained
-        self.free = np.flatnonzero(~constrained)
-        free_index = np.full(n, -1, dtype=np.int64)
-        free_index[self.free] = np.arange(len(self.free))
-        r, c = self.assembler.pattern_rows, self.assembler.pattern_cols
-        self._pattern_keys = r * n + c  # sorted (row-major): the position of each entry in K.data
-        keep = (free_index[r] >= 0) & (free_index[c] >= 0)
-        self._ff_take = np.flatnonzero(keep)
-        rows_ff, cols_ff = free_index[r[keep]], free_index[c[keep]]
-        nf = len(self.free)
-        self._ff_indptr = np.concatenate([[0], np.cumsum(np.bincount(rows_ff, minlength=nf))]).astype(np.int32)
-        self._ff_indices = cols_ff.astype(np.int32)
-        self.linear_solver = SparseSymmetricSolver(self.options.backend)
-        self._K_ff: sp.csr_matrix | None = None
-        self._factor_is_recent = False  # the factorization is of a tangent of the current solve
+        self.system = FreeDofs(self.assembler.pattern_rows, self.assembler.pattern_cols, constrained,
+                               self.options.backend)
+        self.free = self.system.free
         self._moment_offset = self._initial_moment_residual = 0.0
         if self.hinge is not None:
             # length that turns the hinge moment into a force for the combined residual norm
@@ -193,23 +184,6 @@ class QuasiStaticSolver:
             self._moment_length = max(float(np.sqrt(np.mean(arm**2))), 1e-12)
 
     # ------------------------------------------------------------------------------------------
-    def _free_upper(self, K: sp.csr_matrix) -> sp.csr_matrix:
-        """K_ff (upper triangle) as one persistent CSR object whose data is refreshed in place:
-        the pattern is fixed, so scipy's format checks run once."""
-        if self._K_ff is None:
-            n = len(self.free)
-            self._K_ff = sp.csr_matrix((K.data[self._ff_take], self._ff_indices, self._ff_indptr), shape=(n, n))
-        else:
-            np.take(K.data, self._ff_take, out=self._K_ff.data)
-        outside = getattr(K, "outside", None)
-        if outside is None:
-            return self._K_ff
-        # couplings between bodies in contact (persival.model.muscle_contact): a new pattern
-        # whenever the contact pairs change (the sparse solver redoes its analysis then)
-        merged = (self._K_ff + outside[self.free][:, self.free]).tocsr()
-        merged.sort_indices()
-        return merged
-
     def _apply_constraints(self, u: np.ndarray, t: float, theta: float | None) -> None:
         for c in self.constraints:
             if c is self.hinge:
@@ -234,32 +208,18 @@ class QuasiStaticSolver:
         """f + sum of the terms' forces (e.g. contact, docs/theory.md, 3.5); their tangents' upper triangles
         are added into K.data."""
         x = self.mesh.points + np.asarray(u, dtype=float).reshape(-1, 3)
-        n = self.assembler.n_dofs
         for term in self.extra_terms:
             if K is None:
                 f = f + term.force(x)
                 continue
             f_term, K_term = term.force_and_tangent(x)
             f = f + f_term
-            C = sp.coo_matrix(K_term)
-            upper = C.row <= C.col
-            key = C.row[upper].astype(np.int64) * n + C.col[upper]
-            pos = np.minimum(np.searchsorted(self._pattern_keys, key), len(self._pattern_keys) - 1)
-            inside = self._pattern_keys[pos] == key
-            if not inside.all() and not getattr(term, "couples_bodies", False):
-                raise ValueError(f"extra term {type(term).__name__} couples DOFs outside the finite-element pattern")
-            np.add.at(K.data, pos[inside], C.data[upper][inside])
-            if not inside.all():  # contact between two bodies: kept beside the FE pattern
-                outside = sp.csr_matrix((C.data[upper][~inside], (C.row[upper][~inside], C.col[upper][~inside])),
-                                        shape=K.shape)
-                K.outside = outside if getattr(K, "outside", None) is None else K.outside + outside
+            self.system.add_into(K, K_term, type(term).__name__, getattr(term, "couples_bodies", False))
         return f
 
     def matvec(self, K, x: np.ndarray) -> np.ndarray:
-        """K x for the upper-triangle tangent, with any entries beside the FE pattern (``K.outside``)."""
-        y = symmetric_matvec(K, x)
-        outside = getattr(K, "outside", None)
-        return y if outside is None else y + symmetric_matvec(outside, x)
+        """K x for the upper-triangle tangent (persival.model.free_dofs)."""
+        return self.system.matvec(K, x)
 
     def _set_load_factor(self, t: float) -> None:
         for term in self.extra_terms:
@@ -272,17 +232,6 @@ class QuasiStaticSolver:
         stats.time_assembly += time.perf_counter() - t0
         stats.n_assemblies += 1
         return K, f
-
-    def _factorize_and_solve(self, K, rhs, stats):
-        t0 = time.perf_counter()
-        self.linear_solver.factorize(self._free_upper(K))
-        t1 = time.perf_counter()
-        x = self.linear_solver.solve(rhs)
-        stats.time_factorization += t1 - t0
-        stats.time_solve += time.perf_counter() - t1
-        stats.n_factorizations += 1
-        self._factor_is_recent = True
-        return x
 
     def _hinge_terms(self, u, theta, K=None, f=None):
         """Moment residual r_theta and, with K, the border K_f,theta and K_theta,theta."""
@@ -308,76 +257,14 @@ class QuasiStaticSolver:
         self._moment_offset = 0.0
         K, f = self.tangent(np.asarray(u, dtype=float).ravel(), activation)
         r_theta, k_ft, k_tt = self._hinge_terms(np.asarray(u, dtype=float).ravel(), theta, K, f)
-        self.linear_solver.factorize(self._free_upper(K))
-        return r_theta, float(k_tt - k_ft @ self.linear_solver.solve(k_ft))
+        self.system.linear_solver.factorize(self.system.free_upper(K))
+        return r_theta, float(k_tt - k_ft @ self.system.linear_solver.solve(k_ft))
 
     def condensed_response(self, K: sp.csr_matrix, g: np.ndarray, reuse_factorization: bool = False,
                            force_rate: np.ndarray | None = None) -> tuple[float, np.ndarray]:
-        """Stiffness along a motion ``s g`` of the constrained DOFs with the free DOFs
-        re-equilibrated, the Schur complement ``g.K.g - (K g)_f . K_ff^-1 (K g)_f``, and the
-        equilibrium's sensitivity du/ds (n_dofs,): g on the constrained DOFs, ``-K_ff^-1 (K g)_f``
-        on the free ones (the same solve, so it comes free; a first-order predictor of the next
-        state). K: the upper-triangle tangent of :meth:`tangent`, or of
-        :meth:`Tet10Assembler.tangent` when there are no extra terms.
-
-        ``reuse_factorization``: K is the ``tangent`` of the solution this solver just returned,
-        so its last factorization is of the tangent one converged Newton step earlier; that one
-        preconditions a few steps of iterative refinement against K instead of a factorization
-        of its own (the biceps of the quick mesh: 0.10 s per factorization, 0.03 s per solve).
-        Falls back to factorizing when the refinement stalls.
-
-        ``force_rate``: the residual's own rate ds of change at fixed u (n_dofs,; e.g. obstacles
-        moving with s, docs/theory.md, 3.5): the free DOFs then solve ``K_ff du_f = -(K g + df/ds)_f``,
-        and the first value is still ``g . K du`` (the rate of the constrained DOFs' reaction
-        along g)."""
-        Kg = self.matvec(K, g)
-        k_f = Kg[self.free]
-        b = k_f if force_rate is None else k_f + np.asarray(force_rate, dtype=float)[self.free]
-        x = self._refined_solve(K, b) if reuse_factorization and self._factor_is_recent else None
-        if x is None:
-            self.linear_solver.factorize(self._free_upper(K))
-            x = self.linear_solver.solve(b)
-        du = np.asarray(g, dtype=float).copy()
-        du[self.free] = -x
-        return float(g @ Kg - k_f @ x), du
-
-    def _refined_solve(self, K: sp.csr_matrix, b: np.ndarray, rtol: float = 1e-10, steps: int = 4) -> np.ndarray | None:
-        """K_ff x = b by iterative refinement on the current (nearby) factorization; None if it
-        does not reach ``rtol`` within ``steps`` corrections or a correction does not halve the
-        residual (the factorization is of a tangent too far from K: factorize instead)."""
-        if not self.linear_solver.factorized:
-            return None
-        A = self._free_upper(K)  # only the matrix data: the factorization stays as it was
-        try:
-            x = self.linear_solver.solve(b)
-            target = rtol * float(np.linalg.norm(b))
-            previous = float(np.linalg.norm(b))
-            for _ in range(steps):
-                r = b - symmetric_matvec(A, x)
-                size = float(np.linalg.norm(r))
-                if size <= target:
-                    return x
-                if size > 0.5 * previous:
-                    return None
-                previous = size
-                x = x + self.linear_solver.solve(r)
-        except SingularMatrixError:
-            return None
-        return None
-
-    def _newton_direction(self, K, rhs, stats, rtol: float) -> np.ndarray:
-        """K_ff^-1 rhs: from the held factorization to ``rtol`` where options.reuse_factorization
-        allows and the refinement contracts (an inexact Newton step, Dembo-Eisenstat-Steihaug:
-        a relative linear residual below 1e-3 keeps the convergence superlinear), else factorized."""
-        if self.options.reuse_factorization:
-            t0 = time.perf_counter()
-            x = self._refined_solve(K, rhs, rtol=rtol, steps=8)
-            stats.time_solve += time.perf_counter() - t0
-            if x is not None:
-                stats.n_reused += 1
-                self._factor_is_recent = True  # near enough for condensed_response to try it too
-                return x
-        return self._factorize_and_solve(K, rhs, stats)
+        """The Schur complement along a motion g of the constrained DOFs and du/ds
+        (:meth:`FreeDofs.condensed_response`)."""
+        return self.system.condensed_response(K, g, reuse_factorization, force_rate)
 
     def _residual_norm(self, f, r_theta):
         norm = float(np.linalg.norm(f[self.free]))
@@ -411,7 +298,7 @@ class QuasiStaticSolver:
                 # stored state) needs no predictor: it would cost a factorization for nothing
                 if np.abs(jump).max() > 1e-6 * (1.0 + np.abs(u_start).max()):
                     K, _ = self._assemble(u_start, activation, stats)
-                    u[self.free] += self._factorize_and_solve(K, -self.matvec(K, jump)[self.free], stats)
+                    u[self.free] += self.system.factorize_and_solve(K, -self.matvec(K, jump)[self.free], stats)
             return u, theta
 
         try:
@@ -439,10 +326,10 @@ class QuasiStaticSolver:
             if self.hinge is None:
                 # linear residual at most a tenth of what the Newton tolerance leaves (and 1e-3)
                 rtol = min(1e-3, 0.1 * tolerance / max(norm, 1e-300))
-                du, dtheta = self._newton_direction(K, -r, stats, rtol), 0.0
+                du, dtheta = self.system.newton_direction(K, -r, stats, rtol, opts.reuse_factorization), 0.0
             else:
                 _, k_ft, k_tt = self._hinge_terms(u, theta, K, f)
-                x = self._factorize_and_solve(K, np.column_stack([-r, k_ft]), stats)
+                x = self.system.factorize_and_solve(K, np.column_stack([-r, k_ft]), stats)
                 schur = k_tt - k_ft @ x[:, 1]
                 if schur == 0.0 or not np.isfinite(schur):
                     raise SingularMatrixError("bordered hinge system is singular")
@@ -521,7 +408,7 @@ class QuasiStaticSolver:
             if not np.isfinite(theta):
                 raise ValueError("initial_angle must be finite")
         stats = NewtonStatistics()
-        self._factor_is_recent = False
+        self.system.factor_is_recent = False
         tangent = None
         wall = time.perf_counter()
         opts = self.options
@@ -576,7 +463,7 @@ class QuasiStaticSolver:
             max_volume_change=float(np.abs(np.linalg.det(self.assembler.deformation_gradient(u)) - 1.0).max()),
             hinge_angle_deg=theta,
             hinge_moment_residual=r_theta,
-            tangent=tangent if self._factor_is_recent else None,
+            tangent=tangent if self.system.factor_is_recent else None,
             internal_force=f,
         )
 

@@ -66,12 +66,12 @@ def test_joint_corrections_reuse_the_muscles_factorizations(arm, solver):
     unit = arm.units["biceps"]
     theta = start.angle_deg + 0.03
     factorizations = []
-    factorize = unit.solver.linear_solver.factorize
-    unit.solver.linear_solver.factorize = lambda A: (factorizations.append(1), factorize(A))
+    factorize = unit.solver.system.linear_solver.factorize
+    unit.solver.system.linear_solver.factorize = lambda A: (factorizations.append(1), factorize(A))
     try:
         reused = unit.solve(theta, 0.5, start, fresh_slope=False)
     finally:
-        del unit.solver.linear_solver.factorize
+        del unit.solver.system.linear_solver.factorize
     fresh = unit.solve_from_guess(theta, 0.5, start.displacement)
     assert reused.iterations >= 1 and not factorizations
     assert np.abs(reused.displacement - fresh.displacement).max() < 1e-6
