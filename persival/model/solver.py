@@ -272,6 +272,62 @@ class QuasiStaticSolver:
             return norm
         return float(np.hypot(norm, r_theta / self._moment_length))
 
+    def _direction(self, u, theta, K, f, r_theta, stats, rtol: float) -> tuple[np.ndarray, float]:
+        """The Newton direction: du on the free DOFs (to a relative linear residual ``rtol``
+        where a factorization is reused) and, with a free hinge, dtheta (deg) from the bordered
+        system by its Schur complement on the factorized K_ff (two right-hand sides)."""
+        r = f[self.free]
+        if self.hinge is None:
+            return self.system.newton_direction(K, -r, stats, rtol, self.options.reuse_factorization), 0.0
+        _, k_ft, k_tt = self._hinge_terms(u, theta, K, f)
+        x = self.system.factorize_and_solve(K, np.column_stack([-r, k_ft]), stats)
+        schur = k_tt - k_ft @ x[:, 1]
+        if schur == 0.0 or not np.isfinite(schur):
+            raise SingularMatrixError("bordered hinge system is singular")
+        dtheta = (-r_theta - k_ft @ x[:, 0]) / schur
+        du = x[:, 0] - x[:, 1] * dtheta
+        dtheta = float(np.degrees(dtheta))
+        # Trust region on the angle: near a fold of the equilibrium path the Schur
+        # complement (the effective joint stiffness) nearly vanishes and the raw step
+        # flies off (seen: 212 deg for a 1372 N mm imbalance at 370 N mm/rad).
+        if abs(dtheta) > self.options.max_angle_step:
+            shrink = self.options.max_angle_step / abs(dtheta)
+            du, dtheta = du * shrink, dtheta * shrink
+        return du, dtheta
+
+    def _line_search(self, u, theta, du, dtheta, r, r_theta, norm, tolerance, t, activation, stats):
+        """The accepted point along (du, dtheta): (u, theta, K, f, |r|, r_theta) there.
+
+        The problem is hyperelastic, so the Newton direction should lower the potential:
+        s(eta) = dPi/deta = d . r(u + eta d) is its slope along the direction. Accept a step
+        that lowers the residual norm or flattens the slope (|s| <= 0.5 |s(0)|: the energy
+        minimum along d is near); otherwise move eta by regula falsi on s. The slope test copes
+        with the kinks of the fibre laws at lambda = 1, where the residual norm alone often
+        refuses good steps."""
+        slope0 = float(du @ r) + (np.radians(dtheta) * r_theta if self.hinge else 0.0)
+        eta = 1.0
+        for _ in range(self.options.max_line_search + 1):
+            trial = u.copy()
+            trial[self.free] += eta * du
+            theta_t = None if theta is None else theta + eta * dtheta
+            if self.hinge is not None:
+                self._apply_constraints(trial, t, theta_t)
+            try:
+                K_t, f_t = self._assemble(trial, activation, stats)
+                r_theta_t = self._hinge_terms(trial, theta_t, f=f_t)[0] if self.hinge else 0.0
+                norm_t = self._residual_norm(f_t, r_theta_t)
+                slope = float(du @ f_t[self.free]) + (np.radians(dtheta) * r_theta_t if self.hinge else 0.0)
+                flattened = slope0 < 0 and abs(slope) <= 0.5 * abs(slope0)
+                if norm_t < (1.0 - 1e-4 * eta) * norm or norm_t <= tolerance or flattened:
+                    return trial, theta_t, K_t, f_t, norm_t, r_theta_t
+                if slope0 < 0 < slope:  # overshot the minimum along d: interpolate
+                    eta = min(max(eta * slope0 / (slope0 - slope), 0.1 * eta), 0.9 * eta)
+                    continue
+            except InvertedElementError:
+                pass
+            eta *= 0.5
+        raise ConvergenceError("line search failed to reduce the residual")
+
     def _newton_step(self, u_start, theta_start, t, activation, stats, secant=None):
         """Solve at load factor t from the converged state; return (u, theta, K, f, history).
 
@@ -323,56 +379,10 @@ class QuasiStaticSolver:
             if converged():
                 return u, theta, K, f, history
             r = f[self.free]
-            if self.hinge is None:
-                # linear residual at most a tenth of what the Newton tolerance leaves (and 1e-3)
-                rtol = min(1e-3, 0.1 * tolerance / max(norm, 1e-300))
-                du, dtheta = self.system.newton_direction(K, -r, stats, rtol, opts.reuse_factorization), 0.0
-            else:
-                _, k_ft, k_tt = self._hinge_terms(u, theta, K, f)
-                x = self.system.factorize_and_solve(K, np.column_stack([-r, k_ft]), stats)
-                schur = k_tt - k_ft @ x[:, 1]
-                if schur == 0.0 or not np.isfinite(schur):
-                    raise SingularMatrixError("bordered hinge system is singular")
-                dtheta = (-r_theta - k_ft @ x[:, 0]) / schur
-                du = x[:, 0] - x[:, 1] * dtheta
-                dtheta = float(np.degrees(dtheta))
-                # Trust region on the angle: near a fold of the equilibrium path the Schur
-                # complement (the effective joint stiffness) nearly vanishes and the raw step
-                # flies off (seen: 212 deg for a 1372 N mm imbalance at 370 N mm/rad).
-                if abs(dtheta) > opts.max_angle_step:
-                    scale = opts.max_angle_step / abs(dtheta)
-                    du, dtheta = du * scale, dtheta * scale
-            # Line search. The problem is hyperelastic, so the Newton direction should lower
-            # the potential: s(eta) = dPi/deta = d . r(u + eta d) is its slope along the
-            # direction. Accept a step that lowers the residual norm or flattens the slope
-            # (|s| <= 0.5 |s(0)|: the energy minimum along d is near); otherwise move eta by
-            # regula falsi on s. The slope test copes with the kinks of the fibre laws at
-            # lambda = 1, where the residual norm alone often refuses good steps.
-            slope0 = float(du @ r) + (np.radians(dtheta) * r_theta if self.hinge else 0.0)
-            eta = 1.0
-            for _ls in range(opts.max_line_search + 1):
-                trial = u.copy()
-                trial[self.free] += eta * du
-                theta_t = None if theta is None else theta + eta * dtheta
-                if self.hinge is not None:
-                    self._apply_constraints(trial, t, theta_t)
-                try:
-                    K_t, f_t = self._assemble(trial, activation, stats)
-                    r_theta_t = self._hinge_terms(trial, theta_t, f=f_t)[0] if self.hinge else 0.0
-                    norm_t = self._residual_norm(f_t, r_theta_t)
-                    slope = float(du @ f_t[self.free]) + (np.radians(dtheta) * r_theta_t if self.hinge else 0.0)
-                    flattened = slope0 < 0 and abs(slope) <= 0.5 * abs(slope0)
-                    if norm_t < (1.0 - 1e-4 * eta) * norm or norm_t <= tolerance or flattened:
-                        break
-                    if slope0 < 0 < slope:  # overshot the minimum along d: interpolate
-                        eta = min(max(eta * slope0 / (slope0 - slope), 0.1 * eta), 0.9 * eta)
-                        continue
-                except InvertedElementError:
-                    pass
-                eta *= 0.5
-            else:
-                raise ConvergenceError("line search failed to reduce the residual")
-            u, theta, K, f, norm, r_theta = trial, theta_t, K_t, f_t, norm_t, r_theta_t
+            # linear residual at most a tenth of what the Newton tolerance leaves (and 1e-3)
+            du, dtheta = self._direction(u, theta, K, f, r_theta, stats, min(1e-3, 0.1 * tolerance / max(norm, 1e-300)))
+            u, theta, K, f, norm, r_theta = self._line_search(u, theta, du, dtheta, r, r_theta, norm, tolerance, t,
+                                                              activation, stats)
             history.append(norm)
             stats.iterations += 1
         if converged():
@@ -395,35 +405,15 @@ class QuasiStaticSolver:
         each accepted load step.
         """
         m = self.mesh.n_cells
-        target = self._validated_activation(activation, "activation")
-        start = (target * 0.0 if initial_activation is None
-                 else self._validated_activation(initial_activation, "initial_activation"))
-        u = (np.zeros(self.assembler.n_dofs) if initial_displacement is None
-             else np.asarray(initial_displacement, dtype=float).reshape(-1).copy())
-        if u.shape != (self.assembler.n_dofs,) or not np.all(np.isfinite(u)):
-            raise ValueError("initial_displacement must be a finite (n_nodes, 3) array")
-        theta = None
-        if self.hinge is not None:
-            theta = float(self.hinge.start_deg if initial_angle is None else initial_angle)
-            if not np.isfinite(theta):
-                raise ValueError("initial_angle must be finite")
+        target, start, u, theta = self._validated_start(activation, initial_displacement, initial_activation,
+                                                        initial_angle)
         stats = NewtonStatistics()
         self.system.factor_is_recent = False
         tangent = None
         wall = time.perf_counter()
         opts = self.options
-        self._moment_offset = self._initial_moment_residual = 0.0
-        if self.hinge is not None:
-            # An unbalanced start (a state posed with theta prescribed, say) cannot take the
-            # full moment in one step: its imbalance is released gradually along t.
-            u0 = u.copy()
-            self._apply_constraints(u0, 0.0, theta)
-            try:
-                self._set_load_factor(0.0)
-                f0 = self.internal_force(u0, start)
-                self._initial_moment_residual = self._hinge_terms(u0, theta, f=f0)[0]
-            except InvertedElementError:
-                pass
+        self._moment_offset = 0.0
+        self._initial_moment_residual = self._start_imbalance(u, theta, start)
         t, dt = 0.0, min(1.0, opts.initial_step)
         f = None
         rate = None  # (du/dt, dtheta/dt) of the last accepted step
@@ -466,6 +456,36 @@ class QuasiStaticSolver:
             tangent=tangent if self.system.factor_is_recent else None,
             internal_force=f,
         )
+
+    def _validated_start(self, activation, initial_displacement, initial_activation, initial_angle):
+        """(target activation, start activation, u, theta) of a solve, checked."""
+        target = self._validated_activation(activation, "activation")
+        start = (target * 0.0 if initial_activation is None
+                 else self._validated_activation(initial_activation, "initial_activation"))
+        u = (np.zeros(self.assembler.n_dofs) if initial_displacement is None
+             else np.asarray(initial_displacement, dtype=float).reshape(-1).copy())
+        if u.shape != (self.assembler.n_dofs,) or not np.all(np.isfinite(u)):
+            raise ValueError("initial_displacement must be a finite (n_nodes, 3) array")
+        theta = None
+        if self.hinge is not None:
+            theta = float(self.hinge.start_deg if initial_angle is None else initial_angle)
+            if not np.isfinite(theta):
+                raise ValueError("initial_angle must be finite")
+        return target, start, u, theta
+
+    def _start_imbalance(self, u, theta, activation) -> float:
+        """The free hinge's moment residual at the start (0 without one). An unbalanced start (a
+        state posed with theta prescribed, say) cannot take the full moment in one step: its
+        imbalance is released gradually along t (the residual homotopy of _newton_step)."""
+        if self.hinge is None:
+            return 0.0
+        u0 = u.copy()
+        self._apply_constraints(u0, 0.0, theta)
+        try:
+            self._set_load_factor(0.0)
+            return self._hinge_terms(u0, theta, f=self.internal_force(u0, activation))[0]
+        except InvertedElementError:
+            return 0.0
 
     def _validated_activation(self, activation, name) -> np.ndarray:
         a = np.asarray(activation, dtype=float)
