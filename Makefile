@@ -6,7 +6,7 @@ OUT    ?= results
 WEB    := persival/deploy/web
 WEB_SRC := $(WEB)/package.json $(WEB)/package-lock.json $(WEB)/build.mjs $(WEB)/index.html $(wildcard $(WEB)/src/*)
 
-.PHONY: setup web chromium run lint test test-fast bench clean
+.PHONY: setup lock web chromium run lint test test-fast bench clean
 
 setup: $(VENV)/.installed web
 
@@ -29,13 +29,31 @@ chromium:
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver; \
 	  else echo "warning: no /usr/bin/chromium (apt-get install chromium): the viewer tests will skip"; fi; }
 
-$(VENV)/.installed: pyproject.toml
+# requirements.lock pins every package of '.[fast,test]' exactly (torch: the CPU build), so each
+# setup installs the same versions; the project itself goes in without its ranges (--no-deps),
+# and pip check fails the setup when the lock no longer satisfies pyproject.toml (run make lock).
+$(VENV)/.installed: pyproject.toml requirements.lock
 	@command -v $(PYTHON) >/dev/null || { echo "need $(PYTHON) (set PYTHON=...)"; exit 1; }
 	$(PYTHON) -m venv $(VENV)
 	# --no-compile: Python byte-compiles each module on its first import instead of all of them
 	# now (torch's thousands): 58 s against 88 s for this step
-	$(BIN)/pip install --quiet --no-compile -e '.[fast,test]'
+	$(BIN)/pip install --quiet --no-compile -r requirements.lock
+	$(BIN)/pip install --quiet --no-compile --no-deps -e .
+	$(BIN)/pip check
 	touch $@
+
+# Regenerate requirements.lock after a change to the dependencies in pyproject.toml: `make lock`
+# keeps the pins that still fit and resolves only what changed; `make lock UPGRADE=1` takes the
+# newest releases of everything. pip-compile (pip-tools, in a throwaway venv) resolves
+# '.[fast,test]' with pip, which takes torch 2.13.0's CPU build from this machine's wheel folder
+# (uv would resolve a CUDA build); the grep fails the target when the lock names a CUDA package.
+PIP_TOOLS := pip-tools==7.7.0
+lock:
+	tmp=$$(mktemp -d) && trap 'rm -rf "$$tmp"' EXIT && $(PYTHON) -m venv "$$tmp" \
+	  && "$$tmp/bin/pip" install --quiet '$(PIP_TOOLS)' \
+	  && "$$tmp/bin/pip-compile" --quiet $(if $(UPGRADE),--upgrade) --extra=fast --extra=test --allow-unsafe \
+	     --strip-extras --no-emit-find-links --no-emit-index-url --output-file=requirements.lock pyproject.toml
+	@! grep -inE '^(nvidia|triton)' requirements.lock || { echo "requirements.lock pulls a CUDA torch"; exit 1; }
 
 run: setup
 	$(BIN)/persival run --out $(OUT)

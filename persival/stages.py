@@ -67,31 +67,48 @@ def inverse(out: Path, config, console) -> dict:
     console.print(f"  activation model: {len(model.knots)} knots over {lo:.2f}-{hi:.2f} deg "
                   f"(reachable {problem.reachable_range()[0]:.2f}-{problem.reachable_range()[1]:.2f}), "
                   f"{len(model.branch_notes)} branch notes, built in {build_s:.1f} s")
+    unconverged = model.metadata.get("unconverged_intervals", [])
+    if unconverged:
+        console.print(f"  [yellow]{len(unconverged)} interval(s) still off the solver by more than the tolerance[/yellow] "
+                      "(max_knots reached): activation_model.json's metadata lists them")
     return {"range_deg": [lo, hi], "reachable_deg": list(problem.reachable_range()), "knots": len(model.knots),
-            "branch_notes": model.branch_notes, "examples": solution.rows()}
+            "branch_notes": model.branch_notes, "unconverged_intervals": unconverged, "examples": solution.rows()}
 
 
 def motion(out: Path, config, console) -> dict:
-    """The motion model needs per-muscle FE moments: a moment table of the same arm model."""
-    from persival.surrogate.base import load_surrogate
+    """The motion model solves least effort on the deployed model's own moment balance (the
+    structured model's, fitted to the tables); a run without it (the analytic stand-in) needs a
+    moment table of an arm (--moment-table)."""
     from persival.surrogate.motion_model import MotionActivationModel, plot_motion_model
-    from persival.tables.moment_table import MomentTable
 
-    path = config.moment_table or (out / "tables" / "moments.npz" if config.simulator == "arm" else None)
-    if path is None:
+    if (out / "structured" / "surrogate.json").is_file():
+        from persival.surrogate.base import load_surrogate
+
+        deployed = load_surrogate(out / "structured")
+        provenance = {"model_hash": deployed.metadata.get("model_hash"), "profile": deployed.profile}
+        model = MotionActivationModel.build(deployed.moments, provenance=provenance)
+        source = str(out / "structured")
+    elif config.moment_table is not None:
+        from persival.model.arm_file import load_model_file
+        from persival.tables.moment_table import MomentTable
+
+        spec, model_hash = load_model_file(config.model)
+        profile = config.profile if config.simulator == "arm" else None  # the analytic stand-in has no mesh
+        table = MomentTable.load(config.moment_table, model_hash=model_hash, profile=profile, complete=True)
+        model = MotionActivationModel.from_table(table, spec)
+        source = config.moment_table
+    else:
         why = "the analytic stand-in has no muscle moments"
         console.print(f"  [yellow]skipped[/yellow]: {why}; the export has no activation_motion model")
         return {"skipped": why}
-    sg = load_surrogate(out / "sg")
-    table = MomentTable.load(path, model_hash=sg.metadata.get("model_hash"), profile=config.profile)
-    model = MotionActivationModel.build(table)
     model.save(out / "motion")
     plot_motion_model(model, out / "motion" / "motion_model.png")
     holdable = model.holdable_load_kg(np.array([30.0, 60.0, 90.0, 120.0]))
-    console.print(f"  range {model.range_deg[0]:.0f}-{model.range_deg[1]:.0f} deg; holdable load at 30/60/90/120 deg: "
-                  + " / ".join(f"{h:.2f}" for h in holdable) + " kg")
-    return {"range_deg": list(model.range_deg), "holdable_load_kg_30_60_90_120": holdable.tolist(),
-            "table": str(path)}
+    reach = model.static_range_deg()
+    console.print(f"  range {model.range_deg[0]:.0f}-{model.range_deg[1]:.0f} deg, held with no load {reach[0]:.1f}-"
+                  f"{reach[1]:.1f} deg; holdable load at 30/60/90/120 deg: " + " / ".join(f"{h:.2f}" for h in holdable) + " kg")
+    return {"range_deg": list(model.range_deg), "static_range_deg": list(reach),
+            "holdable_load_kg_30_60_90_120": holdable.tolist(), "balance": source}
 
 
 def data(out: Path, config, console) -> dict:
@@ -135,13 +152,16 @@ def train(out: Path, config, console) -> dict:
 
 
 def export(out: Path, config, console) -> dict:
+    """The deployed model with the activation models of its own balance (the motion model and it
+    at rest: the angle a user asks for is the angle it draws); the POD network with the paper's
+    sparse-grid angle model."""
     from persival.deploy.export import export_model
     from persival.surrogate.activation_model import AngleActivationModel
     from persival.surrogate.base import load_surrogate
     from persival.surrogate.dataset import Dataset
 
     network = load_surrogate(out / "networks" / "pod")
-    model = AngleActivationModel.load(out / "inverse" / "activation_model.json")
+    sg_angle = AngleActivationModel.load(out / "inverse" / "activation_model.json")
     motion_model = None
     if (out / "motion" / "motion_model.json").exists():
         from persival.surrogate.motion_model import MotionActivationModel
@@ -150,12 +170,14 @@ def export(out: Path, config, console) -> dict:
     held = out / "campaign" / "held_out.zarr"
     held = Dataset.from_store(held).select(list(network.surfaces.names)) if held.exists() else None
     # the deployed model (export/): the structured surrogate where the run has one, else the POD net
-    exports = {"export": network}
+    exports = {"export": (network, sg_angle, motion_model)}
     if (out / "structured" / "surrogate.json").is_file():
-        exports = {"export": load_surrogate(out / "structured"), "export_pod": network}
+        deployed = load_surrogate(out / "structured")
+        angle_model = motion_model.at_rest() if motion_model is not None else sg_angle
+        exports = {"export": (deployed, angle_model, motion_model), "export_pod": (network, sg_angle, None)}
     summary = {}
-    for folder, surrogate in exports.items():
-        meta = export_model(surrogate, out / folder, activation_model=model, motion_model=motion_model, held_out=held)
+    for folder, (surrogate, angle_model, motion) in exports.items():
+        meta = export_model(surrogate, out / folder, activation_model=angle_model, motion_model=motion, held_out=held)
         deployed = meta["provenance"].get("deployed", {})
         console.print(f"  {folder}/: {surrogate.metadata.get('arch')}{' (deployed)' if folder == 'export' else ''}" + "".join(
             f"; {tier} {v['bytes'] / 1e6:.3f} MB, |ONNX - torch| <= {v['max_abs_diff_vs_torch']['positions']:.1e} mm"
@@ -165,8 +187,23 @@ def export(out: Path, config, console) -> dict:
             console.print(f"    vs {h['states']} held-out FE states: worst MaxAE {h['max_ae_mm']:.2f} mm, mean MAE "
                           f"{h['mae_mm']:.3f} mm, worst angle error {h.get('max_angle_error_deg', float('nan')):.2f} deg")
         summary[folder] = {"model": surrogate.metadata.get("arch"), "variants": meta["models"]["deformation"]["variants"],
-                           "n_nodes": meta["n_nodes"], "deployed": deployed or None}
+                           "n_nodes": meta["n_nodes"], "deployed": deployed or None,
+                           "angle_model": meta["models"].get("activation_angle", {}).get("source")}
+    if "export_pod" in exports:
+        summary["contract"] = _contract_check(out / "export", console)
     return summary
+
+
+def _contract_check(folder: Path, console) -> dict:
+    """(angle, load) -> activations -> the deployed model's angle, on random requests (SPEC 5, 9)."""
+    from persival.deploy.artifacts import DeployedModel
+    from persival.deploy.contract import angle_requests, check_angle_contract
+
+    model = DeployedModel(folder)
+    result = check_angle_contract(model, angle_requests(model, 200, seed=0))
+    console.print(f"  contract: {result['requests']} random (angle, load) requests -> the deployed model's angle within "
+                  f"{result['max_angle_error_deg']:.3f} deg (mean {result['mean_angle_error_deg']:.3f})")
+    return result
 
 
 def evaluate(out: Path, config, console) -> dict:

@@ -91,7 +91,8 @@ def add_motion_model(export: Path, table: Path = Path(__file__).parent / "data" 
     from persival.surrogate.motion_model import MotionActivationModel
     from persival.tables.moment_table import MomentTable
 
-    model = MotionActivationModel.build(MomentTable.load(table, load_model_file(None)[1], complete=True))
+    spec, model_hash = load_model_file(None)
+    model = MotionActivationModel.from_table(MomentTable.load(table, model_hash, complete=True), spec)
     entry = model.export_onnx(export)
     meta = json.loads((export / "metadata.json").read_text())
     meta["models"]["activation_motion"] = entry

@@ -118,6 +118,8 @@ CASES = [
     ("evaluate", ["--run", "nosuch"], "missing run folder", "no such run folder"),
     ("evaluate", ["--run", "folder"], "run folder without an SG", "no sparse-grid surrogate"),
     ("report", ["--run", "folder"], "run folder without an evaluation", "no evaluation"),
+    ("report readme", ["--results", "nosuch.json"], "missing results file", "no such results file"),
+    ("report readme", ["--results", "afile"], "a results file that is not JSON", "not JSON"),
     ("bench nn", ["--run", "afile"], "a file where a run folder is expected", "no such run folder"),
     ("export", ["--network", "nosuch", "--out", "new"], "missing network", "not a surrogate folder"),
     ("export", ["--network", "folder", "--out", "afile"], "file where a folder is expected", "is a file, not a folder"),

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from persival.file_header import check_header
+from persival.onnx_io import onnx_session
 from persival.vocabulary import N_ACTIVATIONS, check_activation_vector
 
 __all__ = ["ArtifactError", "DeployedModel", "FORMAT_NAME", "SUPPORTED_VERSIONS", "TIERS"]
@@ -30,18 +31,12 @@ class ArtifactError(RuntimeError):
 
 
 def _session(path: Path):
-    import onnxruntime as ort
-
     if not path.is_file():
         raise ArtifactError(f"{path}: file missing (listed in metadata.json)")
-    opts = ort.SessionOptions()
-    # One thread per session: the server answers many small requests concurrently, and a
-    # thread pool per call would only add wake-up latency on a 2-core machine.
-    opts.intra_op_num_threads = 1
-    opts.inter_op_num_threads = 1
-    opts.log_severity_level = 3  # a graph's optional input (load_kg) is also an initializer: ORT warns at every load
     try:
-        return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
+        # One thread per session: the server answers many small requests concurrently, and a
+        # thread pool per call would only add wake-up latency on a 2-core machine.
+        return onnx_session(path, threads=1)
     except Exception as exc:  # onnxruntime raises its own Fail/InvalidGraph types
         raise ArtifactError(f"{path}: not a loadable ONNX model ({str(exc).splitlines()[0]})") from None
 
@@ -126,6 +121,9 @@ class DeployedModel:
         # Optional parts: an export may lack the angle output, the angle model or the motion model;
         # the requests that need them are refused then, the rest is served.
         self.has_angle = "elbow_angle_deg" in [o.name for o in self.sessions["float32"].get_outputs()]
+        # an optional input backed by an initializer is listed among the overridable initializers
+        float32 = self.sessions["float32"]
+        self.takes_load = "load_kg" in [i.name for i in float32.get_inputs() + float32.get_overridable_initializers()]
         self.angle, self.angle_range = None, None
         if models.get("activation_angle"):
             self.angle_range = self._angle_model(models["activation_angle"])
@@ -171,8 +169,18 @@ class DeployedModel:
                 raise ValueError(f"activations[{i}] ({self.muscles[i]}) must be a number, got {type(v).__name__}")
         return check_activation_vector(activations).astype(np.float32)
 
-    def predict(self, activations, tier: str = "float32") -> tuple[np.ndarray, np.ndarray]:
-        """Positions (n, n_nodes, 3) mm and elbow angles (n,) deg for activations (5,) or (n, 5)."""
+    def check_load(self, load_kg) -> float:
+        """A load in the hand (kg) in [0, max_load_kg], or ValueError."""
+        load = _finite_number(load_kg, "load_kg")
+        if load and self.motion is None:
+            raise ValueError("load_kg needs the motion model, which this export does not have")
+        if not 0.0 <= load <= self.max_load_kg:
+            raise ValueError(f"load_kg = {load} lies outside [0, {self.max_load_kg}]")
+        return load
+
+    def predict(self, activations, tier: str = "float32", load_kg=0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Positions (n, n_nodes, 3) mm and elbow angles (n,) deg for activations (5,) or (n, 5)
+        and a load in the hand (kg): the deformation model solves the elbow's balance with it."""
         if tier not in self.sessions:
             raise ValueError(f"tier {tier!r} is not exported (have {self.tiers})")
         rows = activations.tolist() if isinstance(activations, np.ndarray) else activations
@@ -180,29 +188,50 @@ class DeployedModel:
             batch = np.stack([self.check_activations(r) for r in rows])
         else:
             batch = self.check_activations(rows)[None, :]
+        load = self.check_load(load_kg)
+        feeds = {"activations": batch}
+        if load:
+            if not self.takes_load:
+                raise ValueError("this export's deformation model takes no load (load_kg): send activations alone")
+            feeds["load_kg"] = np.full((1, 1), load, np.float32)
         if not self.has_angle:
-            positions = self.sessions[tier].run(["positions"], {"activations": batch})[0]
+            positions = self.sessions[tier].run(["positions"], feeds)[0]
             return positions, np.full(len(batch), np.nan, np.float32)
-        positions, angle = self.sessions[tier].run(["positions", "elbow_angle_deg"], {"activations": batch})
+        positions, angle = self.sessions[tier].run(["positions", "elbow_angle_deg"], feeds)
         return positions, angle[:, 0]
 
     def activations_for_angle(self, angle_deg, load_kg=None) -> np.ndarray:
-        """Least-effort activations (5,) for a static elbow angle (and a hand load, if exported)."""
+        """Least-effort activations (5,) that hold the elbow at an angle with a load in the hand (kg):
+        the angle model without a load, the motion model with one; a load the muscles cannot hold
+        there is refused with the load they can."""
         angle = _finite_number(angle_deg, "angle_deg")
         if self.angle is None:
             raise ValueError("this export has no activation model (activation_angle.onnx): send activations")
         lo, hi = self.angle_range
         if not lo <= angle <= hi:
             raise ValueError(f"angle_deg = {angle} lies outside the model's range [{lo:.2f}, {hi:.2f}]")
-        if load_kg is None:
+        load = 0.0 if load_kg is None else self.check_load(load_kg)
+        if not load:
             return self.angle.run(None, {"elbow_angle_deg": np.array([[angle]], np.float32)})[0][0]
-        load = _finite_number(load_kg, "load_kg")
+        activations, *deficit = self.motion.run(None, {"motion": np.array([[angle, 0.0, 0.0, load]], np.float32)})
+        if deficit and deficit[0][0, 0] > 0:
+            held = float(self.holdable_load_kg([angle])[0])
+            raise ValueError(f"the muscles hold at most {held:.2f} kg at {angle:g} deg, not {load:g} kg")
+        return activations[0]
+
+    def holdable_load_kg(self, angles_deg, iterations: int = 40) -> np.ndarray:
+        """The heaviest load (kg, at most max_load_kg) held at rest at each angle: bisection on the
+        motion model's moment deficit (0 where the muscles hold the load)."""
+        angles = np.asarray(angles_deg, dtype=np.float32).reshape(-1)
         if self.motion is None:
-            raise ValueError("load_kg needs the motion model, which this export does not have")
-        if not 0.0 <= load <= self.max_load_kg:
-            raise ValueError(f"load_kg = {load} lies outside [0, {self.max_load_kg}]")
-        motion = np.array([[angle, 0.0, 0.0, load]], np.float32)
-        return self.motion.run(None, {"motion": motion})[0][0]
+            return np.zeros(len(angles))
+        lo, hi = np.zeros(len(angles)), np.full(len(angles), self.max_load_kg)
+        for _ in range(iterations):
+            mid = 0.5 * (lo + hi)
+            rows = np.column_stack([angles, np.zeros((len(angles), 2)), mid]).astype(np.float32)
+            held = self.motion.run(None, {"motion": rows})[1][:, 0] <= 0
+            lo, hi = np.where(held, mid, lo), np.where(held, hi, mid)
+        return lo
 
     def split(self, positions: np.ndarray) -> dict[str, np.ndarray]:
         """One state's (n_nodes, 3) positions cut into the muscles' node ranges."""

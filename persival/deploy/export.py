@@ -24,13 +24,13 @@ import numpy as np
 import torch
 
 import persival
+from persival.onnx_io import OPSET, export_graph, onnx_session
 from persival.vocabulary import MUSCLES, UNITS
 
 __all__ = ["export_model", "FORMAT_NAME", "FORMAT_VERSION", "OPSET", "FLOAT32_TOLERANCE_MM"]
 
 FORMAT_NAME = "persival-export"
 FORMAT_VERSION = 1
-OPSET = 17
 FLOAT32_TOLERANCE_MM = 1e-4
 TIERS = ("float32", "float16", "int8")
 LOAD_INPUT = "load_kg"  # optional second input of a graph that solves the joint equilibrium
@@ -39,30 +39,13 @@ LOAD_PROBE_KG = 2.0  # the load the required-input file is checked at
 
 
 def _onnx(module: torch.nn.Module, example, path: Path, input_name, output_names: list[str], fold: bool = True) -> None:
-    """Trace ``module`` to ONNX; ``example`` and ``input_name``: one tensor and name, or tuples of
-    them; ``fold``: constant folding at export (off keeps float16 weights and their casts, which the
-    runtime folds when it loads the file)."""
-    examples = example if isinstance(example, tuple) else (example,)
-    input_names = list(input_name) if isinstance(input_name, tuple) else [input_name]
-    # the optional load has its own batch size: its default (one row, 0 kg) broadcasts over any batch
-    axes = {**{name: {0: "load_batch" if name == LOAD_INPUT else "batch"} for name in input_names},
-            **{name: {0: "batch"} for name in output_names}}
-    with warnings.catch_warnings():
-        # The TorchScript exporter, on purpose: these graphs are plain dense layers, it needs no
-        # onnxscript, and its output is what the tier checks below verify. It warns that it is legacy.
-        warnings.simplefilter("ignore", DeprecationWarning)
-        # the tracer notes every strided Slice it cannot fold; the graph is checked below instead
-        warnings.filterwarnings("ignore", message="Constant folding", category=UserWarning)
-        torch.onnx.export(module.eval(), examples, str(path), input_names=input_names, output_names=output_names,
-                          dynamic_axes=axes, opset_version=OPSET, dynamo=False, do_constant_folding=fold)
+    """Trace ``module`` to ONNX (persival.onnx_io); the optional load has its own batch size: its
+    default (one row, 0 kg) broadcasts over any batch."""
+    export_graph(module, example, path, input_name, output_names, fold=fold, dynamic_axes={LOAD_INPUT: {0: "load_batch"}})
 
 
 def _session(path: Path):
-    import onnxruntime as ort
-
-    options = ort.SessionOptions()
-    options.log_severity_level = 3  # the optional load input is also an initializer: ORT warns about it
-    return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+    return onnx_session(path)
 
 
 def _optional_load_input(path: Path) -> None:
@@ -168,8 +151,11 @@ def _export_activation_model(model, out: Path) -> dict:
     probe = np.linspace(*model.range_deg, 257)[:, None]
     got = _session(path).run(None, {"elbow_angle_deg": probe.astype(np.float32)})[0]
     diff = float(np.abs(got - model.predict(probe[:, 0])).max())
+    if diff > 1e-6:
+        raise RuntimeError(f"activation_angle.onnx differs from Python by {diff:.2e} (tolerance 1e-6)")
     return {"file": path.name, "input": "elbow_angle_deg", "output": "activations",
             "range_deg": list(model.range_deg), "knots": len(model.knots), "max_abs_diff_vs_python": diff,
+            "source": getattr(model, "source", "least effort on the sparse grid (the paper's inverse problem)"),
             "branch_notes": model.branch_notes}
 
 

@@ -76,8 +76,11 @@ def _check_id(value, binary: bool):
     return value
 
 
-def parse_request(payload: dict, model: DeployedModel) -> tuple[np.ndarray, str, dict]:
-    """(activations (5,) float32, tier, echo fields) for a request, or RequestError."""
+def parse_request(payload: dict, model: DeployedModel) -> tuple[np.ndarray, float, str, dict]:
+    """(activations (5,) float32, load in the hand (kg), tier, echo fields) for a request, or
+    RequestError. One contract (SPEC 9): `(activations, load_kg) -> (positions, angle)` and
+    `(angle_deg, load_kg) -> activations`, then the positions and angle of those activations
+    with the same load."""
     unknown = sorted(set(payload) - _FIELDS)
     if unknown:
         raise RequestError(422, f"unknown field(s) {unknown}; allowed: {sorted(_FIELDS)}")
@@ -92,14 +95,15 @@ def parse_request(payload: dict, model: DeployedModel) -> tuple[np.ndarray, str,
     if has_a == has_angle:
         raise RequestError(422, "give exactly one of 'activations' or 'angle_deg'")
     try:
+        load = model.check_load(payload.get("load_kg", 0.0))
+        if load and not model.takes_load:
+            raise ValueError("load_kg: this export's deformation model takes no load")
         if has_a:
-            if "load_kg" in payload:
-                raise ValueError("load_kg goes with angle_deg, not with activations")
-            return model.check_activations(payload["activations"]), tier, echo
-        activations = model.activations_for_angle(payload["angle_deg"], payload.get("load_kg"))
+            return model.check_activations(payload["activations"]), load, tier, echo
+        activations = model.activations_for_angle(payload["angle_deg"], load)
     except ValueError as exc:
         raise RequestError(422, str(exc)) from None
-    return np.asarray(activations, dtype=np.float32), tier, echo
+    return np.asarray(activations, dtype=np.float32), load, tier, echo
 
 
 def _rounded(values) -> list:
@@ -108,8 +112,8 @@ def _rounded(values) -> list:
     return [float(np.format_float_positional(v, unique=True, trim="-")) for v in values]
 
 
-def answer(activations: np.ndarray, tier: str, model: DeployedModel) -> tuple[np.ndarray, float]:
-    positions, angle = model.predict(activations, tier)
+def answer(activations: np.ndarray, load_kg: float, tier: str, model: DeployedModel) -> tuple[np.ndarray, float]:
+    positions, angle = model.predict(activations, tier, load_kg)
     return positions[0], float(angle[0])
 
 

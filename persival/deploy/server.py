@@ -81,8 +81,8 @@ async def _read_body(request: Request, limit: int) -> bytes:
 
 
 def _reply(payload: dict, model: DeployedModel):
-    activations, tier, echo = protocol.parse_request(payload, model)
-    positions, angle = protocol.answer(activations, tier, model)
+    activations, load, tier, echo = protocol.parse_request(payload, model)
+    positions, angle = protocol.answer(activations, load, tier, model)
     if echo["encoding"] == "binary":
         return protocol.encode_binary(activations, positions, angle, echo)
     return protocol.encode_json(activations, positions, angle, tier, model, echo)

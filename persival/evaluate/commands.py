@@ -7,14 +7,22 @@ from pathlib import Path
 import typer
 
 from persival.cli_errors import check_output_dir, check_output_file, user_errors
+from persival.cli_help import FullHelpGroup
 from persival.cli_values import parse_numbers
 from persival.model.defaults import profiles_help
 
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     """Attach this stage's commands to the main app and the benchmark group."""
-    for command in (render, sections, curves, accuracy, anatomy, evaluate, report):
+    for command in (render, sections, curves, accuracy, anatomy, evaluate):
         app.command()(command)
+    # `persival report --run RUN` writes the report; `persival report readme` copies its numbers into the docs
+    report_app = typer.Typer(cls=FullHelpGroup, help="One self-contained HTML page of a run (every table and figure, "
+                             "provenance): RUN/report/index.html; `report readme`: its numbers into README.md and "
+                             "docs/benchmarks.md.")
+    app.add_typer(report_app, name="report")
+    report_app.callback(invoke_without_command=True)(report)
+    report_app.command("readme")(readme)
     bench_app.command("fe")(bench_fe)
     bench_app.command("arm")(bench_arm)
     bench_app.command("deployed")(bench_deployed)
@@ -328,9 +336,12 @@ def evaluate(
 
 
 def report(
+    ctx: typer.Context,
     run: Path = typer.Option(Path("results"), "--run", help="Run folder with RUN/evaluate (persival evaluate)."),
 ) -> None:
     """One self-contained HTML page of a run (every table and figure, provenance): RUN/report/index.html."""
+    if ctx.invoked_subcommand is not None:
+        return
     from rich.console import Console
 
     from persival.evaluate.report import write_report
@@ -342,6 +353,32 @@ def report(
         check_output_dir(out)
         index = write_report(run)
     Console().print(f"wrote {index} and {index.parent / 'results.json'}")
+
+
+def readme(
+    results: Path = typer.Option(Path("docs/results.json"), "--results",
+                                 help="A run's results.json (RUN/report/results.json; the committed copy: docs/results.json)."),
+    files: list[Path] = typer.Option(None, "--file", help="Markdown file with result blocks (<!-- results:NAME --> ... "
+                                     "<!-- /results:NAME -->); repeat it. Default: README.md and docs/benchmarks.md."),
+    check: bool = typer.Option(False, "--check", help="Write nothing; exit 1 when a block differs from its rendering."),
+) -> None:
+    """Rewrite the result blocks of README.md and docs/benchmarks.md from a run's results.json."""
+    from persival.evaluate.readme_tables import DEFAULT_FILES, load_results, rewrite_file
+
+    paths = [Path(f) for f in (files or DEFAULT_FILES)]
+    with user_errors():
+        data = load_results(results)
+        for path in paths:  # every file is checked before the first is written
+            rewrite_file(path, data, check=True)
+        statuses = {path: rewrite_file(path, data, check=check) for path in paths}
+    differ = False
+    for path, status in statuses.items():
+        for name, what in status.items():
+            shown = "differs" if check and what == "changed" else what
+            typer.echo(f"{path}: results:{name} {shown}" + (" (kept as written)" if what == "no numbers" else ""))
+            differ |= what == "changed"
+    if check and differ:
+        raise typer.Exit(1)
 
 
 def bench_nn(

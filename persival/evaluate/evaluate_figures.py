@@ -4,13 +4,14 @@ The hot-spot map (the paper's figure of where the network errs) colours every bi
 node by its mean error against the SG over the same random activations, one panel per network
 (the paper net after a short and after its full training, the POD net), each panel on its own
 colour scale (the panels' errors differ by orders of magnitude), drawn with off-screen
-pyvista at the reference configuration; matplotlib's 3-D trisurf stands in if VTK cannot
-render.
+pyvista at the reference configuration; matplotlib's 3-D trisurf stands in if pyvista is not
+installed or VTK cannot render (no off-screen OpenGL), and a warning says which and why.
 """
 
 from __future__ import annotations
 
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -91,16 +92,26 @@ def _matplotlib_panels(points, triangles, maps: dict[str, np.ndarray], path: Pat
     save_figure(fig, path)
 
 
-def plot_hotspots(points, triangles, maps: dict[str, np.ndarray], path: str | Path) -> Path:
+def plot_hotspots(points, triangles, maps: dict[str, np.ndarray], path: str | Path, skipped: dict | None = None) -> Path:
     """One panel per entry of ``maps`` (label -> per-node mean error, mm), each with its own colour
     scale from 0 to its largest error: a shared scale let one poorly trained net (tens of mm) turn
-    the trained ones (a few mm) into one flat colour. Each panel's mean and max are in its title."""
+    the trained ones (a few mm) into one flat colour. Each panel's mean and max are in its title.
+
+    Where pyvista cannot draw it, matplotlib does; the reason goes into a RuntimeWarning and,
+    given the evaluation's ``skipped`` dict, into ``skipped["hotspots_pyvista"]``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
         _pyvista_panels(points, triangles, maps, path)
-    except Exception:  # no usable VTK render window here: the same picture through matplotlib
-        _matplotlib_panels(points, triangles, maps, path)
+        return path
+    except ImportError as exc:  # pyvista is optional for this figure
+        why = f"pyvista is not installed ({exc})"
+    except Exception as exc:  # e.g. no off-screen OpenGL (no display, no EGL or OSMesa), or a VTK error
+        why = f"pyvista could not render it ({type(exc).__name__}: {exc})"
+    warnings.warn(f"hot-spot figure {path.name}: {why}; drawn with matplotlib instead", RuntimeWarning, stacklevel=2)
+    if skipped is not None:
+        skipped["hotspots_pyvista"] = f"{why}; {path.name} drawn with matplotlib instead"
+    _matplotlib_panels(points, triangles, maps, path)
     return path
 
 

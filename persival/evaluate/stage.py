@@ -189,7 +189,7 @@ def _prototypes_and_hotspots(run, steps, command, tables, skipped, figures, prot
             maps[name] = hotspot_errors(net.predict, net.surfaces, run.sg)
     if maps:
         points, triangles = biceps_surface(run.sg.surfaces)
-        figures["hotspots"] = plot_hotspots(points, triangles, maps, layout.evaluate / "hotspots_biceps.png")
+        figures["hotspots"] = plot_hotspots(points, triangles, maps, layout.evaluate / "hotspots_biceps.png", skipped)
         (layout.evaluate / "hotspots_biceps.json").write_text(json.dumps(
             {k: {"mean_mm": float(v.mean()), "max_mm": float(v.max())} for k, v in maps.items()}, indent=1))
 

@@ -10,12 +10,14 @@ model file and mesh profile are chosen; the solved states live in :mod:`persival
 
 from __future__ import annotations
 
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
 from persival.model.arm_file import Muscle, load_model_file
 from persival.model.assembly import MaterialField
+from persival.model.external_moments import ExternalMoments
 from persival.model.mesh import Tet10Mesh
 from persival.model.muscle_sweep import Sweep, muscle_profile, outlined_centre_line, sweep_sections
 from persival.model.rotations import rotation_about
@@ -214,27 +216,24 @@ class ArmBody(ArmKinematics):
         return -self.muscle_length(muscle, theta_deg)[1]
 
     # -- loads --------------------------------------------------------------------------------
+    @cached_property
+    def external(self) -> ExternalMoments:
+        """Gravity on forearm and hand and the passive joint moment (docs/theory.md, 3.6)."""
+        return ExternalMoments.of_arm(self.spec)
+
     def gravity_moment(self, theta_deg: float) -> float:
         """Moment of the forearm's weight about the hinge (N mm, flexion positive): -m g r sin(theta)."""
-        fa = self.spec.forearm
-        return -fa.mass * fa.gravity * fa.centre_of_mass * np.sin(np.radians(theta_deg))
+        return float(self.external.gravity(theta_deg))
 
     def passive_joint_moment(self, theta_deg: float) -> float:
         """K [exp((theta_min - theta)/w) - exp((theta - theta_max)/w)]: stiffens beyond the limits."""
-        j = self.spec.joint
-        lo, hi = j.limits_deg
-        return j.limit_moment * (np.exp((lo - theta_deg) / j.limit_width_deg) - np.exp((theta_deg - hi) / j.limit_width_deg))
+        return float(self.external.joint(theta_deg))
 
     def external_moment(self, theta_rad: float) -> tuple[float, float]:
         """Gravity + passive joint moment and its derivative per radian (the hinge's load)."""
         theta = np.degrees(theta_rad)
-        fa, j = self.spec.forearm, self.spec.joint
-        lo, hi = j.limits_deg
-        w = j.limit_width_deg
-        M = self.gravity_moment(theta) + self.passive_joint_moment(theta)
-        dM = -fa.mass * fa.gravity * fa.centre_of_mass * np.cos(theta_rad)
-        dM += j.limit_moment * (-np.exp((lo - theta) / w) - np.exp((theta - hi) / w)) / w * (180.0 / np.pi)
-        return float(M), float(dM)
+        external = self.external
+        return float(external.value(theta)), float(external.slope(theta) * (180.0 / np.pi))
 
     def cell_activation(self, activations: np.ndarray) -> np.ndarray:
         return np.asarray(activations, dtype=float)[self.mesh.cell_data["muscle"]]

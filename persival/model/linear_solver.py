@@ -4,7 +4,10 @@ The tangent keeps its sparsity pattern for a whole solve, so PARDISO's symbolic 
 (fill-reducing ordering, the costly part of a first factorization) runs once per pattern and
 every Newton iteration only refactorizes numerically (phase 22). pypardiso's public
 ``factorize`` repeats the analysis every time and re-converts the index arrays on every call;
-we call MKL's pardiso through pypardiso's handle with index arrays converted once.
+we call MKL's pardiso through pypardiso's handle with index arrays converted once. That uses
+pypardiso's private internals (``_mkl_pardiso``, ``_pt_type``, ``_check_A``, ``libmkl._name``,
+``pardiso_wrapper.PyPardisoError``), so pyproject.toml pins pypardiso exactly; check them before
+raising the pin (tests/model/test_linear_solver.py exercises each).
 The matrix is symmetric (hyperelastic tangent), so only the upper triangle is passed. A
 tangent at or near a stable equilibrium is positive definite, so Cholesky (mtype 2) is tried
 first: on the quick biceps (13632 DOF) 37 ms per factorization and 3.4 ms per solve against
@@ -16,11 +19,15 @@ the next few (slack, bowed muscles stay indefinite for a while).
 
 from __future__ import annotations
 
+import logging
 import os
+import warnings
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+
+log = logging.getLogger(__name__)
 
 
 def _name_mkl_runtime() -> None:
@@ -41,14 +48,43 @@ def _name_mkl_runtime() -> None:
             os.environ["PYPARDISO_MKL_RT"] = found[0]
 
 
-_name_mkl_runtime()
-try:  # pragma: no cover - depends on the platform
-    import pypardiso as _pypardiso
+def _import_pardiso():
+    """(the pypardiso module or None, why it is not there: None, "not installed" or the error).
 
-    HAVE_PARDISO = True
-except Exception:  # noqa: BLE001 - any import problem (no MKL) means: use SciPy
-    _pypardiso = None
-    HAVE_PARDISO = False
+    Not installed (the `fast` extra left out, or a platform without MKL) is an expected setup;
+    installed but failing to import (MKL's runtime missing or broken: pypardiso loads it at
+    import) is a fault, and its reason is kept for the warning instead of being swallowed.
+    """
+    try:
+        import pypardiso
+    except ModuleNotFoundError as exc:
+        if exc.name == "pypardiso":
+            return None, None
+        return None, f"{type(exc).__name__}: {exc}"
+    except Exception as exc:  # noqa: BLE001 - ImportError, OSError from ctypes (MKL), anything raised inside
+        return None, f"{type(exc).__name__}: {exc}"
+    return pypardiso, None
+
+
+_name_mkl_runtime()
+_pypardiso, PARDISO_IMPORT_ERROR = _import_pardiso()
+HAVE_PARDISO = _pypardiso is not None
+_fallback_reported = False
+
+
+def _report_scipy_fallback() -> None:
+    """Say once per process why backend="auto" takes SciPy: a log line when pypardiso is not
+    installed, a RuntimeWarning with the reason when it is installed but broken."""
+    global _fallback_reported
+    if _fallback_reported:
+        return
+    _fallback_reported = True
+    if PARDISO_IMPORT_ERROR is None:
+        log.warning("pypardiso is not installed (pip install 'persival[fast]'): sparse solves use SciPy's SuperLU, "
+                    "slower than MKL PARDISO")
+    else:
+        warnings.warn(f"pypardiso is installed but failed to import ({PARDISO_IMPORT_ERROR}): sparse solves use "
+                      "SciPy's SuperLU, slower than MKL PARDISO", RuntimeWarning, stacklevel=3)
 
 
 class SingularMatrixError(RuntimeError):
@@ -150,8 +186,11 @@ class SparseSymmetricSolver:
     def __init__(self, backend: str = "auto") -> None:
         if backend == "auto":
             backend = "pardiso" if HAVE_PARDISO else "scipy"
+            if not HAVE_PARDISO:
+                _report_scipy_fallback()
         if backend == "pardiso" and not HAVE_PARDISO:
-            raise RuntimeError("pypardiso is not installed; use backend='scipy' or `pip install pypardiso`")
+            why = "is not installed" if PARDISO_IMPORT_ERROR is None else f"failed to import ({PARDISO_IMPORT_ERROR})"
+            raise RuntimeError(f"pypardiso {why}; use backend='scipy' or `pip install 'persival[fast]'`")
         if backend not in ("pardiso", "scipy"):
             raise ValueError(f"unknown sparse solver backend {backend!r}")
         self.backend = backend

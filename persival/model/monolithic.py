@@ -28,7 +28,7 @@ def verify_equilibrium(arm, state: ArmState) -> tuple[float, float]:
     other = [m.name for m in muscles if m.wraps or m.insertion_tie != "line"]
     if other:
         raise ValueError(f"verify_equilibrium checks line-tied muscles without bones; {other} have bones or "
-                         "forearm ties (their own checks: tests/test_contact.py)")
+                         "forearm ties (their own checks: tests/model/test_contact.py)")
     for m in muscles:
         insertion_ref = arm.body_end(m, m.mesh_angle_deg)
         for end in ("origin", "insertion"):

@@ -30,6 +30,18 @@ class ConvergenceError(RuntimeError):
     """The load stepping could not reach t = 1 (the step size fell below its minimum)."""
 
 
+class InvertedStartError(ConvergenceError):
+    """The start state has inverted elements (det F <= 0): no state to continue from. A
+    ConvergenceError, so callers that fall back to another start (a library guess, a detour) still do."""
+
+    def __init__(self, n_inverted: int, where: str) -> None:
+        super().__init__(f"{where} has {n_inverted} inverted element(s) (det F <= 0): no state to solve from")
+        self.n_inverted, self.where = n_inverted, where
+
+    def __reduce__(self):  # rebuilt from its own arguments where a campaign worker sends it back
+        return type(self), (self.n_inverted, self.where)
+
+
 @dataclass
 class SolverOptions:
     rtol: float = 1e-8  # residual relative to the load-step force scale
@@ -471,7 +483,18 @@ class QuasiStaticSolver:
             theta = float(self.hinge.start_deg if initial_angle is None else initial_angle)
             if not np.isfinite(theta):
                 raise ValueError("initial_angle must be finite")
+        self._check_not_inverted(u, "the start")
         return target, start, u, theta
+
+    def _check_not_inverted(self, u, where: str) -> None:
+        """Refuse a state with det F <= 0 at some quadrature point, naming how many elements. Let
+        through, every load step from it fails and is halved down to ``min_step`` (a misleading
+        "load step fell below"), and on a free hinge its moment imbalance, which cannot be
+        evaluated there, would count as zero: a balanced start."""
+        det = np.linalg.det(self.assembler.deformation_gradient(u))
+        n_inverted = int(np.count_nonzero((~(det > 0.0)).any(axis=1)))  # NaN counts as inverted too
+        if n_inverted:
+            raise InvertedStartError(n_inverted, where)
 
     def _start_imbalance(self, u, theta, activation) -> float:
         """The free hinge's moment residual at the start (0 without one). An unbalanced start (a
@@ -481,11 +504,9 @@ class QuasiStaticSolver:
             return 0.0
         u0 = u.copy()
         self._apply_constraints(u0, 0.0, theta)
-        try:
-            self._set_load_factor(0.0)
-            return self._hinge_terms(u0, theta, f=self.internal_force(u0, activation))[0]
-        except InvertedElementError:
-            return 0.0
+        self._check_not_inverted(u0, f"the start posed at the hinge angle {theta:.2f} deg")
+        self._set_load_factor(0.0)
+        return self._hinge_terms(u0, theta, f=self.internal_force(u0, activation))[0]
 
     def _validated_activation(self, activation, name) -> np.ndarray:
         a = np.asarray(activation, dtype=float)

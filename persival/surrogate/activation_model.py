@@ -13,6 +13,7 @@ leaves its bound 0 or 1, and a spline would overshoot there.
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -58,11 +59,11 @@ class AngleActivationModel:
             values.append(a)
             if progress is not None:
                 progress(1, len(knots))
-        knots, values, jumps = cls._bisect(problem, knots, values, tolerance, max_knots)
+        knots, values, jumps, unconverged = cls._bisect(problem, knots, values, tolerance, max_knots)
         notes += [{"angle_deg": t, "jump": j, "note": "alpha_opt jumps here (the branch ends): the map "
                    "interpolates linearly across 1e-3 deg"} for t, j in jumps]
         meta = {"reachable_range_deg": list(reach), "tolerance": tolerance, "knots": len(knots),
-                "effort_weight": problem.weight}
+                "effort_weight": problem.weight, "unconverged_intervals": unconverged}
         return cls(knots, values, notes, meta)
 
     @staticmethod
@@ -70,10 +71,12 @@ class AngleActivationModel:
         """Insert midpoints until the solver agrees with the interpolation everywhere.
 
         An interval narrower than ``min_width`` deg that still disagrees holds a jump of
-        alpha_opt; it is reported, not split further.
+        alpha_opt; it is reported, not split further. Returns (knots, values, jumps, unconverged):
+        the intervals still disagreeing when ``max_knots`` stopped the bisection, as
+        ``[{"from_deg", "to_deg", "disagreement"}]`` (also a warning).
         """
         knots, values = list(knots), [np.asarray(v) for v in values]
-        pending, jumps = list(range(len(knots) - 1)), []
+        pending, jumps, inserts = list(range(len(knots) - 1)), [], []
         while pending and len(knots) < max_knots:
             inserts = []
             for i in pending:
@@ -85,13 +88,36 @@ class AngleActivationModel:
                     continue
                 a, _ = problem.solve_from(mid, guess)
                 if np.abs(a - guess).max() > tolerance:
-                    inserts.append((i, mid, a))
-            for i, mid, a in reversed(inserts):  # back to front keeps the indices valid
+                    inserts.append((i, mid, a, float(np.abs(a - guess).max())))
+            for i, mid, a, _ in reversed(inserts):  # back to front keeps the indices valid
                 knots.insert(i + 1, mid)
                 values.insert(i + 1, a)
             # the two halves of every split interval are checked again
-            pending = sorted({j for n, (i, _, _) in enumerate(sorted(inserts)) for j in (i + n, i + n + 1)})
-        return np.array(knots), np.array(values), jumps
+            pending = sorted({j for n, (i, *_) in enumerate(sorted(inserts)) for j in (i + n, i + n + 1)})
+        unconverged = AngleActivationModel._unconverged(knots, pending, inserts, tolerance, max_knots)
+        return np.array(knots), np.array(values), jumps, unconverged
+
+    @staticmethod
+    def _unconverged(knots, pending, inserts, tolerance, max_knots) -> list[dict]:
+        """The intervals ``_bisect`` left disagreeing when ``max_knots`` stopped it, with a warning.
+
+        Each is an interval split in the last round (its two halves unchecked) with the
+        disagreement found at its midpoint; where no round ran (the initial knots already reach
+        ``max_knots``) every interval is unchecked and its disagreement unknown (None).
+        """
+        if not pending:
+            return []
+        if inserts:  # knot i + n (n inserts before it) and i + n + 2 bound the split interval
+            out = [{"from_deg": float(knots[i + n]), "to_deg": float(knots[i + n + 2]), "disagreement": d}
+                   for n, (i, _, _, d) in enumerate(inserts)]
+        else:
+            out = [{"from_deg": float(knots[i]), "to_deg": float(knots[i + 1]), "disagreement": None} for i in pending]
+        known = [u["disagreement"] for u in out if u["disagreement"] is not None]
+        worst = f"worst {max(known):.3g}" if known else "none checked"
+        warnings.warn(f"activation model: bisection stopped at max_knots = {max_knots} with {len(out)} interval(s) "
+                      f"where the solver still disagrees with the interpolation ({worst}; tolerance {tolerance:.3g}); "
+                      "metadata['unconverged_intervals'] lists them", RuntimeWarning, stacklevel=4)
+        return out
 
     # ------------------------------------------------------------------ evaluation
     def predict(self, theta_deg) -> np.ndarray:

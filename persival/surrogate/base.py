@@ -6,7 +6,7 @@ answers surface positions ``(n, N, 3)`` in mm for activations ``(n, 5)``, ``pred
 elbow angle where the surrogate has it (``has_angle``), ``predict_with_angle`` both at once,
 ``save(dir)`` / ``load(dir)`` a folder whose ``surrogate.json`` names the kind and the format
 version, so :func:`load_surrogate` opens any of them and the evaluation code never asks which one
-it measures. Every surrogate inherits :class:`Surrogate`; tests/test_surrogate_conformance.py
+it measures. Every surrogate inherits :class:`Surrogate`; tests/surrogate/test_surrogate_conformance.py
 runs the same checks over every kind.
 """
 

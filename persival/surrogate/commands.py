@@ -289,8 +289,8 @@ def _build_motion(table: Path, out: Path, model: Path | None, angles: str, loads
         if not np.isfinite(targets).all():
             raise ValueError(f"--angles must be finite, got {angles!r}")
         check_output_dir(out)
-        moments = MomentTable.load(table, load_model_file(model)[1], complete=True)
-        model_ = MotionActivationModel.build(moments)
+        spec, model_hash = load_model_file(model)
+        model_ = MotionActivationModel.from_table(MomentTable.load(table, model_hash, complete=True), spec)
         rows = np.array([[t, 0.0, 0.0, m] for t in targets for m in masses])
         activations, feasible = model_.predict(rows)  # angles outside the range: a user error
         out.mkdir(parents=True, exist_ok=True)

@@ -9,12 +9,15 @@ with a slack variable t it becomes the smooth problem
 
 solved by SLSQP with the SG's exact gradients. Starts: for all targets at once, the objective is
 evaluated on one fixed candidate set (a scrambled Sobol' sample of the cube plus its corners,
-one batched SG evaluation), and each target starts from its best few distinct candidates.
+one batched SG evaluation), and each target starts from its best few distinct candidates; the
+best start SLSQP reports as successful wins (a failed one only where none succeeded: the target's
+row says ``converged: false`` and a warning names it with scipy's message).
 The reachable range is found the same way (min and max of theta over the cube).
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,13 +38,14 @@ class InverseSolution:
     achieved_deg: np.ndarray  # (n,)
     objective: np.ndarray  # (n,)
     reachable: np.ndarray  # (n,) bool: target inside the reachable range
+    converged: np.ndarray  # (n,) bool: SLSQP reported success for the start taken
 
     def rows(self) -> list[dict]:
         """The JSON rows of ``persival inverse --json``."""
         return [{"target_deg": float(t), "activations": [float(v) for v in a], "achieved_deg": float(g),
-                 "objective": float(o), "reachable": bool(r)}
-                for t, a, g, o, r in zip(self.target_deg, self.activations, self.achieved_deg, self.objective,
-                                         self.reachable)]
+                 "objective": float(o), "reachable": bool(r), "converged": bool(c)}
+                for t, a, g, o, r, c in zip(self.target_deg, self.activations, self.achieved_deg, self.objective,
+                                            self.reachable, self.converged)]
 
 
 def _check_targets(targets) -> np.ndarray:
@@ -103,6 +107,7 @@ class InverseProblem:
         return np.abs(target - self.model.predict_angle(a)) + self.weight * a.sum(axis=1)
 
     def _refine(self, start: np.ndarray, target: float):
+        """(activations, objective, scipy's result) of SLSQP from one start."""
         model, w = self.model, self.weight
         theta0 = model.predict_angle(start[None])[0]
         z0 = np.append(start, abs(target - theta0))
@@ -121,7 +126,7 @@ class InverseProblem:
                           constraints=[{"type": "ineq", "fun": gap, "jac": gap_jac}],
                           options={"ftol": 1e-12, "maxiter": 300})
         a = np.clip(result.x[:5], 0.0, 1.0)
-        return a, float(self.objective(a, target)[0])
+        return a, float(self.objective(a, target)[0]), result
 
     def starts_for(self, targets: np.ndarray, n_starts: int) -> np.ndarray:
         """(n_targets, n_starts, 5): the best distinct candidates per target, all targets in one pass."""
@@ -149,13 +154,27 @@ class InverseProblem:
             starts = np.concatenate([np.asarray(warm_starts, dtype=float).reshape(len(targets), 1, 5), starts], axis=1)
         alphas = np.empty((len(targets), 5))
         objective = np.empty(len(targets))
+        converged = np.empty(len(targets), dtype=bool)
+        failures = []
         for i, target in enumerate(targets):
             results = [self._refine(s, target) for s in starts[i]]
-            alphas[i], objective[i] = min(results, key=lambda r: r[1])
+            # a failed start can stop anywhere (an iteration limit, a line search that gave up):
+            # it stands in only where no start succeeded, and then says so
+            succeeded = [r for r in results if r[2].success]
+            alphas[i], objective[i], best = min(succeeded or results, key=lambda r: r[1])
+            converged[i] = bool(succeeded)
+            if not succeeded:
+                failures.append(f"{target:g} deg ({best.message})")
+        if failures:
+            warnings.warn(f"SLSQP failed from all {starts.shape[1]} starts for {len(failures)} of {len(targets)} "
+                          f"elbow-angle target(s); their best failed start is kept, marked converged=False: "
+                          + "; ".join(failures), RuntimeWarning, stacklevel=2)
         lo, hi = self.reachable_range()
         achieved = self.model.predict_angle(alphas)
-        return InverseSolution(targets, alphas, achieved, objective, (targets >= lo - 1e-9) & (targets <= hi + 1e-9))
+        return InverseSolution(targets, alphas, achieved, objective, (targets >= lo - 1e-9) & (targets <= hi + 1e-9),
+                               converged)
 
     def solve_from(self, target: float, start) -> tuple[np.ndarray, float]:
         """One target from one given start (the continuation of the activation model)."""
-        return self._refine(np.clip(np.asarray(start, dtype=float), 0.0, 1.0), float(target))
+        a, f, _ = self._refine(np.clip(np.asarray(start, dtype=float), 0.0, 1.0), float(target))
+        return a, f

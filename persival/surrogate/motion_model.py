@@ -1,7 +1,10 @@
 """The motion-and-load activation model (docs/theory.md, 6.4; beyond the paper).
 
-``(Theta, dTheta/dt, d2Theta/dt2, load) -> alpha`` from the per-muscle FE moment tables
-(:mod:`persival.tables.moment_table`). The hinge's equation of motion about the elbow
+``(Theta, dTheta/dt, d2Theta/dt2, load) -> alpha`` on the deployed model's own moment balance
+(:class:`~persival.surrogate.structured.moment_model.MomentModel`: the per-muscle FE moment tables
+interpolated as the deployed graph interpolates them, and one
+:class:`~persival.model.external_moments.ExternalMoments`), so that the activations it gives hold
+the drawn arm at the angle asked for (SPEC 5). The hinge's equation of motion about the elbow
 (flexion positive, docs/theory.md, 3.1) is ``I(load) Theta'' = sum_m M_m(Theta, a_m) + M_g(Theta) +
 M_load(Theta) + M_p(Theta)``, so the muscles must supply the required moment
 
@@ -26,12 +29,16 @@ from pathlib import Path
 
 import numpy as np
 
+from persival.onnx_io import export_graph, onnx_session
 from persival.vocabulary import MUSCLES
 
 __all__ = ["MotionActivationModel", "least_effort", "plot_motion_model", "WINTER_GYRATION_RATIO"]
 
 WINTER_GYRATION_RATIO = 0.827 / 0.682  # radius of gyration about the elbow / centre-of-mass distance
 _ONNX_NAME = "activation_motion.onnx"
+_ANGLE_ONNX_NAME = "activation_angle.onnx"
+#: activations at which each muscle's moment is sampled for the least-effort solve (docs/theory.md, 6.4)
+ACTIVATION_SAMPLES = 33
 
 
 def _response(V, levels, lam):
@@ -90,12 +97,13 @@ def least_effort(V, levels, required, iterations: int = 90):
 class MotionActivationModel:
     """``predict(motion (n, 4)) -> (activations (n, 5), feasible (n,))``; ONNX via ``export_onnx``."""
 
-    def __init__(self, theta_deg, s_grid, alpha, base, m_min, m_max, params: dict) -> None:
+    def __init__(self, theta_deg, s_grid, alpha, base, m_min, m_max, load_base, params: dict) -> None:
         self.theta = np.asarray(theta_deg, float)  # (nT,) uniform
         self.s = np.asarray(s_grid, float)  # (nS,) uniform in [0, 1]
         self.alpha = np.asarray(alpha, float)  # (nT, nS, 5)
         self.base = np.asarray(base, float)  # (nT,) -(M_g + M_p), N mm
         self.m_min, self.m_max = np.asarray(m_min, float), np.asarray(m_max, float)  # (nT,) N mm
+        self.load_base = np.asarray(load_base, float)  # (nT,) -M_load per kg in the hand, N mm
         self.params = dict(params)  # hand_distance_mm, gravity_m_s2, inertia_kg_mm2, ...
 
     @property
@@ -103,32 +111,55 @@ class MotionActivationModel:
         return float(self.theta[0]), float(self.theta[-1])
 
     @classmethod
-    def build(cls, table, theta_step_deg: float = 1.0, n_moment: int = 201, inertia_kg_mm2: float | None = None,
-              hand_distance_mm: float | None = None) -> MotionActivationModel:
-        """Solve the least-effort problem on the (Theta, s) grid from a complete MomentTable."""
-        if not table.complete:
-            raise ValueError(f"the moment table is unfinished ({int(table.done.sum())} of {table.done.size} columns)")
-        lo, hi = table.finite_range_deg()
+    def build(cls, moments, theta_step_deg: float = 1.0, n_moment: int = 201, n_activation: int = ACTIVATION_SAMPLES,
+              inertia_kg_mm2: float | None = None, provenance: dict | None = None) -> MotionActivationModel:
+        """Solve the least-effort problem on the (Theta, s) grid on a moment balance: the deployed
+        model's own (:class:`~persival.surrogate.structured.moment_model.MomentModel`, so that the
+        activations it gives hold the drawn arm at the angle asked for; docs/theory.md, 6.4).
+
+        Each muscle's moment is sampled at ``n_activation`` activations of the balance's own
+        interpolation in a (a cubic spline through the table's levels): the least-effort solver
+        works on the piecewise-linear interpolant of these samples, which differs from the spline
+        by h^2/8 max|M''| (1.05 N mm at most at 33 samples on the coarse arm's tables; the (Theta, s)
+        grid's interpolation, up to 32 N mm, sets the angle error, docs/theory.md 6.4).
+        """
+        external = moments.external
+        lo, hi = moments.range_deg
         # motions stay within the joint's anatomical limits (the tables reach beyond them, for
         # the static equilibria of strong co-contractions)
-        limits = table.meta.get("joint_limits_deg")
-        if limits is not None:
-            lo, hi = max(lo, limits[0]), min(hi, limits[1])
+        lo, hi = max(lo, external.limits_deg[0]), min(hi, external.limits_deg[1])
         theta = np.linspace(lo, hi, int(round((hi - lo) / theta_step_deg)) + 1)
-        V = np.stack([table.level_moments(m, theta) for m in MUSCLES], axis=1)  # (nT, 5, J)
+        levels = np.linspace(0.0, 1.0, n_activation)
+        grid_t, grid_a = np.meshgrid(theta, levels, indexing="ij")
+        V = np.stack([moments.muscle_moment(m, grid_t.ravel(), grid_a.ravel()).reshape(grid_t.shape) for m in MUSCLES],
+                     axis=1)  # (nT, 5, J)
         m_min, m_max = V.min(axis=2).sum(axis=1), V.max(axis=2).sum(axis=1)
         s = np.linspace(0.0, 1.0, n_moment)
         R = m_min[:, None] + s[None, :] * (m_max - m_min)[:, None]
-        a, _ = least_effort(np.repeat(V, n_moment, axis=0), table.levels, R.ravel())
-        fa = table.meta["forearm"]
+        a, _ = least_effort(np.repeat(V, n_moment, axis=0), levels, R.ravel())
         params = {
-            "hand_distance_mm": float(hand_distance_mm or fa["hand_distance_mm"]), "gravity_m_s2": fa["gravity_m_s2"],
-            "inertia_kg_mm2": float(inertia_kg_mm2 or fa["mass_kg"] * (WINTER_GYRATION_RATIO * fa["centre_of_mass_mm"]) ** 2),
-            "forearm_mass_kg": fa["mass_kg"], "effort": "sum of squared activations",
-            "model_hash": table.meta.get("model_hash"), "profile": table.meta.get("profile"),
-            "table_angles_deg": table.angles_deg.tolist(), "table_levels": table.levels.tolist()}
-        base = -(table.gravity_moment(theta) + table.passive_joint_moment(theta))
-        return cls(theta, s, a.reshape(len(theta), n_moment, 5), base, m_min, m_max, params)
+            "hand_distance_mm": external.hand_distance_mm, "gravity_m_s2": external.gravity_m_s2,
+            "inertia_kg_mm2": float(inertia_kg_mm2 or external.mass_kg
+                                    * (WINTER_GYRATION_RATIO * external.centre_of_mass_mm) ** 2),
+            "forearm_mass_kg": external.mass_kg, "effort": "sum of squared activations",
+            "balance": "the deployed model's moment balance", "activation_samples": int(n_activation),
+            **(provenance or {})}
+        base = -external.value(theta)
+        load_base = external.gravity(theta) - external.gravity(theta, 1.0)
+        return cls(theta, s, a.reshape(len(theta), n_moment, 5), base, m_min, m_max, load_base, params)
+
+    @classmethod
+    def from_table(cls, table, spec, **options) -> MotionActivationModel:
+        """From a complete FE moment table (``persival moments``) and its model file's forearm and
+        joint, through the same moment balance the deployed model fits to it."""
+        from persival.surrogate.structured.moment_model import MomentModel
+
+        if not table.complete:
+            raise ValueError(f"the moment table is unfinished ({int(table.done.sum())} of {table.done.size} columns)")
+        # near_deg picks among equilibria; the motion model prescribes the angle and needs none
+        moments = MomentModel.from_table(table, spec, near_deg=table.finite_range_deg()[0])
+        provenance = {"model_hash": table.meta.get("model_hash"), "profile": table.meta.get("profile")}
+        return cls.build(moments, provenance=provenance, **options)
 
     # ------------------------------------------------------------------ evaluation
     def _check(self, motion) -> np.ndarray:
@@ -146,17 +177,19 @@ class MotionActivationModel:
 
     def required_moment(self, motion) -> np.ndarray:
         """M_req (N mm) of the muscles for (angle, velocity, acceleration, load) rows (docs/theory.md, 6.4)."""
-        return self._required(self._check(motion), np, self.base)
+        return self._required(self._check(motion), np, self.base, self.load_base)
 
-    def _required(self, m, xp, base):
-        """The moment balance of docs/theory.md, 6.4, written once for numpy and torch (``xp``)."""
+    def _required(self, m, xp, base, load_base):
+        """The moment balance of docs/theory.md, 6.4, written once for numpy and torch (``xp``); the
+        external moments are tabulated on the angle grid from the one ExternalMoments the deployed
+        model balances (linear between 1-degree nodes: under 0.7 N mm)."""
         p = self.params
         theta, acc, load = m[:, 0], m[:, 2], m[:, 3]
-        base = self._interp_theta(theta, base, xp)
+        i, w = self._cell(theta, self.theta, xp)
+        at = lambda values: values[i] * (1 - w) + values[i + 1] * w  # noqa: E731
         d = p["hand_distance_mm"]
-        load_gravity = load * p["gravity_m_s2"] * d * xp.sin(theta * (np.pi / 180.0))  # -M_load
         inertia = 1e-3 * (p["inertia_kg_mm2"] + load * d**2) * acc * (np.pi / 180.0)  # kg mm^2 rad/s^2 -> N mm
-        return base + load_gravity + inertia
+        return at(base) + load * at(load_base) + inertia
 
     def _interp_theta(self, theta, values, xp):
         i, w = self._cell(theta, self.theta, xp)
@@ -172,10 +205,12 @@ class MotionActivationModel:
         i = xp.clip(i, 0, n - 2) if xp is np else i.clamp(0, n - 2)
         return i, u - i
 
+    _ARRAYS = ("alpha", "m_min", "m_max", "base", "load_base")
+
     def _evaluate(self, m, xp, tables):
         """Activations and the signed moment deficit (N mm; 0 where feasible) for checked rows."""
-        alpha, m_min, m_max, base = tables
-        R = self._required(m, xp, base)
+        alpha, m_min, m_max, base, load_base = tables
+        R = self._required(m, xp, base, load_base)
         lo, hi = self._interp_theta(m[:, 0], m_min, xp), self._interp_theta(m[:, 0], m_max, xp)
         i, wt = self._cell(m[:, 0], self.theta, xp)
         j, ws = self._cell((R - lo) / (hi - lo), self.s, xp)
@@ -191,16 +226,30 @@ class MotionActivationModel:
         """Activations (n, 5) and feasible (n,) bool; infeasible rows are flagged, not clipped
         silently (their activations are the saturated best effort). Raises ValueError on bad
         input: not (n, 4), not finite, a negative load or an angle outside the range."""
-        a, deficit = self._evaluate(self._check(motion), np, (self.alpha, self.m_min, self.m_max, self.base))
+        a, deficit = self._evaluate(self._check(motion), np, tuple(getattr(self, k) for k in self._ARRAYS))
         return (a, deficit == 0.0, deficit) if with_deficit else (a, deficit == 0.0)
 
     def holdable_load_kg(self, theta_deg) -> np.ndarray:
-        """Largest load held statically at each angle (inf where sin(theta) <= 0)."""
+        """Largest load held statically at each angle (inf where the load does not pull the arm down)."""
         theta = np.atleast_1d(np.asarray(theta_deg, float))
         spare = np.interp(theta, self.theta, self.m_max) - np.interp(theta, self.theta, self.base)
-        lever = self.params["gravity_m_s2"] * self.params["hand_distance_mm"] * np.sin(np.radians(theta))
+        lever = np.interp(theta, self.theta, self.load_base)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(lever > 1e-9, np.maximum(spare, 0.0) / lever, np.inf)
+
+    def static_range_deg(self, lowest_deg: float = 10.0) -> tuple[float, float]:
+        """The angles the muscles hold with no load, from ``lowest_deg`` (the paper's admissible 10
+        deg) up: the unbroken run of the grid where [M_min, M_max] holds the required moment."""
+        ok = (self.base >= self.m_min - 1e-9) & (self.base <= self.m_max + 1e-9) & (self.theta >= lowest_deg - 1e-9)
+        if not ok.any():
+            raise ValueError(f"no angle from {lowest_deg:g} deg on is held by the muscles with no load")
+        start = int(np.argmax(ok))
+        stop = start + (int(np.argmin(ok[start:])) if not ok[start:].all() else len(ok) - start)
+        return max(float(self.theta[start]), lowest_deg), float(self.theta[stop - 1])
+
+    def at_rest(self, lowest_deg: float = 10.0) -> RestAngleModel:
+        """The angle activation model of this balance: Theta -> alpha at zero velocity, acceleration and load."""
+        return RestAngleModel(self, self.static_range_deg(lowest_deg))
 
     # ------------------------------------------------------------------ export and files
     def torch_module(self):
@@ -211,11 +260,12 @@ class MotionActivationModel:
         class MotionGraph(torch.nn.Module):
             def __init__(self):
                 super().__init__()
-                for name in ("alpha", "m_min", "m_max", "base"):
+                for name in model._ARRAYS:
                     self.register_buffer(name, torch.tensor(getattr(model, name), dtype=torch.float64))
 
             def forward(self, motion):  # float64 inside: the float32 contract costs only the output's rounding
-                a, deficit = model._evaluate(motion.double(), torch, (self.alpha, self.m_min, self.m_max, self.base))
+                tables = tuple(getattr(self, k) for k in model._ARRAYS)
+                a, deficit = model._evaluate(motion.double(), torch, tables)
                 return a.float(), deficit.unsqueeze(1).float()
 
         return MotionGraph()
@@ -229,16 +279,13 @@ class MotionActivationModel:
     def export_onnx(self, folder: str | Path) -> dict:
         """folder/activation_motion.onnx (opset 17): motion [b, 4] -> activations [b, 5],
         moment_deficit_Nmm [b, 1]; checked against Python (1e-6 on feasible rows)."""
-        import onnxruntime as ort
         import torch
 
         path = Path(folder) / _ONNX_NAME
         example = torch.tensor([[60.0, 0.0, 0.0, 1.0], [90.0, 0.0, 0.0, 2.0]], dtype=torch.float32)
-        torch.onnx.export(self.torch_module().eval(), (example,), str(path), input_names=["motion"],
-                          output_names=["activations", "moment_deficit_Nmm"], opset_version=17, dynamo=False,
-                          dynamic_axes={"motion": {0: "batch"}, "activations": {0: "batch"}, "moment_deficit_Nmm": {0: "batch"}})
+        export_graph(self.torch_module(), example, path, "motion", ["activations", "moment_deficit_Nmm"])
         probe = self.probe().astype(np.float32)
-        got, _ = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).run(None, {"motion": probe})
+        got = onnx_session(path).run(None, {"motion": probe})[0]
         ref, feasible = self.predict(probe.astype(np.float64))
         diff = float(np.abs(got - ref)[feasible].max())
         if diff > 1e-6:
@@ -249,12 +296,11 @@ class MotionActivationModel:
                 "input_columns": ["angle_deg", "velocity_deg_s", "acceleration_deg_s2", "load_kg"],
                 "range_deg": list(self.range_deg), "max_load_kg": float(finite.max()) if len(finite) else 0.0,
                 "holdable_load_kg_per_10_deg": [None if not np.isfinite(h) else round(float(h), 3) for h in holdable],
-                "max_abs_diff_vs_python": diff, **{k: v for k, v in self.params.items() if not k.startswith("table_")}}
+                "max_abs_diff_vs_python": diff, **self.params}
 
     def save(self, folder: str | Path) -> Path:
         (folder := Path(folder)).mkdir(parents=True, exist_ok=True)
-        np.savez(folder / "motion_model.npz", theta=self.theta, s=self.s, alpha=self.alpha, base=self.base,
-                 m_min=self.m_min, m_max=self.m_max)
+        np.savez(folder / "motion_model.npz", theta=self.theta, s=self.s, **{k: getattr(self, k) for k in self._ARRAYS})
         (folder / "motion_model.json").write_text(json.dumps({"kind": "motion-activation-model", **self.params}, indent=1))
         return folder
 
@@ -264,7 +310,56 @@ class MotionActivationModel:
         if params.pop("kind", None) != "motion-activation-model":
             raise ValueError(f"{folder} does not hold a motion activation model")
         with np.load(folder / "motion_model.npz") as d:
-            return cls(d["theta"], d["s"], d["alpha"], d["base"], d["m_min"], d["m_max"], params)
+            if "load_base" not in d.files:
+                raise ValueError(f"{folder}: a motion model of an older version (no load_base): build it again")
+            return cls(d["theta"], d["s"], *(d[k] for k in ("alpha", "base", "m_min", "m_max", "load_base")), params)
+
+
+class RestAngleModel:
+    """Theta -> alpha of the motion model at zero velocity, acceleration and load: the angle
+    activation model that ships with the deployed model, so that the angle and the motion
+    requests of the contract give the same activations at no load (docs/theory.md, 6.4).
+
+    ``predict(theta (n,)) -> activations (n, 5)``; ``torch_module()``: elbow_angle_deg [b, 1] -> activations [b, 5].
+    """
+
+    source = "motion model at zero velocity, acceleration and load (least effort on the deployed model's balance)"
+
+    def __init__(self, motion: MotionActivationModel, range_deg: tuple[float, float]) -> None:
+        self.motion = motion
+        self.range_deg = (float(range_deg[0]), float(range_deg[1]))
+        inside = (motion.theta >= self.range_deg[0]) & (motion.theta <= self.range_deg[1])
+        self.knots = motion.theta[inside]  # where the map has its kinks (the motion grid's angles)
+        self.branch_notes: list = []
+
+    def _rows(self, theta_deg) -> np.ndarray:
+        theta = np.atleast_1d(np.asarray(theta_deg, dtype=np.float64)).reshape(-1)
+        if not np.isfinite(theta).all():
+            raise ValueError("elbow angles must be finite")
+        lo, hi = self.range_deg
+        outside = (theta < lo - 1e-9) | (theta > hi + 1e-9)
+        if outside.any():
+            raise ValueError(f"elbow angle {theta[outside][0]:.3f} deg is outside the model's range {lo:.2f} to {hi:.2f} deg")
+        return np.column_stack([theta, np.zeros((len(theta), 3))])
+
+    def predict(self, theta_deg) -> np.ndarray:
+        return self.motion.predict(self._rows(theta_deg))[0]
+
+    def torch_module(self):
+        import torch
+
+        motion = self.motion.torch_module()
+
+        class AtRest(torch.nn.Module):
+            def __init__(self):
+                super().__init__()
+                self.motion = motion
+
+            def forward(self, theta):
+                zeros = torch.zeros_like(theta)
+                return self.motion(torch.cat([theta, zeros, zeros, zeros], dim=1))[0]
+
+        return AtRest()
 
 
 def plot_motion_model(model: MotionActivationModel, path: str | Path, loads=(0.0, 1.0, 2.0, 5.0)) -> Path:

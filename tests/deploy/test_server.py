@@ -266,14 +266,17 @@ def test_predict_from_angle(client, small_run):
     assert refused.status_code == 422 and "load_kg" in refused.json()["error"]
 
 
-def test_predict_from_angle_and_load(motion_client):
+def test_a_load_is_refused_by_an_export_whose_deformation_takes_none(motion_client):
+    """A held load must reach the arm (SPEC 9): an export whose deformation model has no load
+    input cannot honour it, so it is refused, not answered with the arm unloaded
+    (tests/deploy/test_contract.py checks the load on a deployed model that takes it)."""
     client = motion_client
     assert client.get("/health").json()["motion"] is True
     lo, hi = client.get("/health").json()["angle_range_deg"]
     still = client.post("/api/predict", json={"angle_deg": (lo + hi) / 2}).json()
-    loaded = client.post("/api/predict", json={"angle_deg": (lo + hi) / 2, "load_kg": 4}).json()
     assert len(still["activations"]) == 5 and all(0 <= v <= 1 for v in still["activations"])
-    assert still["activations"] != loaded["activations"]
+    loaded = client.post("/api/predict", json={"angle_deg": (lo + hi) / 2, "load_kg": 4})
+    assert loaded.status_code == 422 and "takes no load" in loaded.json()["error"]
 
 
 BAD_BODIES = [

@@ -3,7 +3,7 @@
 The run is the session's small real run (tests/conftest.py: analytic level-1 campaign, SG of
 all five muscles, activation model, SG training data, a POD net and a paper net on the biceps
 trained for a few epochs, ONNX export), copied once so that the evaluation can write into it;
-tests/test_report.py reuses the copy and its evaluation.
+tests/evaluate/test_report.py reuses the copy and its evaluation.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from persival.evaluate.prototypes import SHAPES, dense_parameters, prototype_wid
 pytestmark = pytest.mark.slow  # a shared fixture of this module takes minutes (make test-fast skips it)
 
 TABLES = ("in_training", "random_activations", "random_angles", "error_propagation", "prototypes")
-# tests/test_report.py imports the fixtures below, which makes pytest hold a second copy of each:
+# tests/evaluate/test_report.py imports the fixtures below, which makes pytest hold a second copy of each:
 # this cache lets both copies share one run per session
 _SESSION: dict = {}
 

@@ -1,6 +1,6 @@
 """`persival report`: one self-contained page with every table and figure, opened in headless Chromium.
 
-Reuses the session's tiny run of tests/test_evaluate.py. The browser check (Debian's
+Reuses the session's tiny run of tests/evaluate/test_evaluate.py. The browser check (Debian's
 /usr/bin/chromium through playwright-core from the web viewer's node_modules) loads the page
 from disk, counts tables and decoded images, records console errors and takes a full-page
 screenshot ($PERSIVAL_REPORT_SHOTS or the test's tmp folder).

@@ -116,3 +116,22 @@ def test_hotspot_panels_have_their_own_colour_scales(monkeypatch, tmp_path):
     evaluate_figures._matplotlib_panels(points, triangles, maps, tmp_path / "h.png")
     limits = [ax.collections[0].get_clim() for ax in figures[0].axes if ax.name == "3d"]
     assert [hi for _, hi in limits] == pytest.approx([float(v.max()) for v in maps.values()])
+
+
+@pytest.mark.parametrize("error, why", [(RuntimeError("no EGL or OSMesa render window"), "could not render it"),
+                                        (ImportError("No module named 'pyvista'"), "is not installed")])
+def test_hotspot_rendering_errors_are_reported_not_dropped(monkeypatch, tmp_path, error, why):
+    from persival.evaluate import evaluate_figures
+
+    def fail(*args):
+        raise error
+
+    drawn = []
+    monkeypatch.setattr(evaluate_figures, "_pyvista_panels", fail)
+    monkeypatch.setattr(evaluate_figures, "_matplotlib_panels", lambda *args: drawn.append(args[-1]))
+    skipped = {}
+    with pytest.warns(RuntimeWarning, match=f"hot-spot figure h.png: pyvista {why}.*{error}.*matplotlib instead"):
+        path = evaluate_figures.plot_hotspots(np.zeros((3, 3)), np.array([[0, 1, 2]]), {"net": np.zeros(3)},
+                                              tmp_path / "h.png", skipped)
+    assert drawn == [path]
+    assert str(error) in skipped["hotspots_pyvista"] and "matplotlib" in skipped["hotspots_pyvista"]

@@ -228,7 +228,7 @@ def curves(arm, states, tables):
     """Every muscle's passive and active moment (persival curves) just below and above the hanging
     angle, at the mesh pose and at 90 and 120 deg: the FE states by the exact path on the fixture
     tables (one continuation sweep per muscle and activation without them: 387 s, the suite's
-    slowest fixture; the sweeps themselves build every table column, tests/test_moment_table.py)."""
+    slowest fixture; the sweeps themselves build every table column, tests/tables/test_moment_table.py)."""
     from persival.evaluate.muscle_curves import muscle_curves
 
     theta = np.floor(states[0].elbow_angle_deg)

@@ -9,7 +9,7 @@ from persival.model.constraints import Dirichlet, Hinge
 from persival.model.geometry import box_mesh, spindle, spindle_material
 from persival.model.material import DEFAULT_PARAMETERS, force_length
 from persival.model.mesh import MeshError, Tet10Mesh
-from persival.model.solver import QuasiStaticSolver
+from persival.model.solver import ConvergenceError, InvertedStartError, QuasiStaticSolver
 
 X_FIBRE = np.array([1.0, 0.0, 0.0])
 
@@ -216,6 +216,25 @@ def test_inverted_and_degenerate_meshes_are_refused():
         Tet10Mesh(mesh.points, mesh.cells[:, :4])
     with pytest.raises(MeshError, match="do not exist"):
         Tet10Mesh(mesh.points, mesh.cells + mesh.n_nodes)
+
+
+def test_an_inverted_start_is_refused_with_its_element_count():
+    """Not a balanced start, nor a run of load-step halvings ending in "load step fell below"."""
+    mesh = box_mesh((1, 1, 2), (10.0, 10.0, 20.0))
+    steps = []
+    solver = QuasiStaticSolver(mesh, uniform_material(mesh), [Dirichlet("z0", mesh.node_sets["z0"])])
+    mirrored = np.zeros((mesh.n_nodes, 3))
+    mirrored[:, 0] = -2.0 * mesh.points[:, 0]  # x -> -x: det F = -1 in every element
+    with pytest.raises(InvertedStartError, match=f"the start has {mesh.n_cells} inverted element") as caught:
+        solver.solve(0.0, initial_displacement=mirrored, progress=steps.append)
+    assert isinstance(caught.value, ConvergenceError) and caught.value.n_inverted == mesh.n_cells and not steps
+    # a free hinge posed at its start angle: the top face turned over folds the elements under it
+    hinge = Hinge("top", mesh.node_sets["z1"], centre=[0, 5, 20], axis=[1, 0, 0], free=True)
+    solver = QuasiStaticSolver(mesh, uniform_material(mesh), [Dirichlet("z0", mesh.node_sets["z0"]), hinge])
+    assert solver.solve(0.0).hinge_angle_deg == pytest.approx(0.0, abs=1e-9)  # upright: balanced as it is
+    with pytest.raises(InvertedStartError, match=r"posed at the hinge angle 180.00 deg has \d+ inverted element"):
+        solver.solve(0.0, initial_angle=180.0, progress=steps.append)
+    assert not steps
 
 
 def test_bad_activation_is_refused():

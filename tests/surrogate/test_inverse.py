@@ -74,3 +74,65 @@ def test_training_data_mixes_both_kinds_and_is_reproducible(small_run, tmp_path)
     np.testing.assert_array_equal(Dataset.load(again).positions, data.positions)
     with pytest.raises(ValueError, match="another configuration"):
         make_training_data(small_run / "sg", small_run / "inverse" / "activation_model.json", tmp_path / "d", 500)
+
+
+class _ToyAngle:
+    """theta = 10 + 70 a0 (1 + a0) - 20 a1 (deg): alpha_opt(Theta) (a0 alone) is curved, so the
+    activation model has to bisect; milliseconds where the SG of ``small_run`` takes minutes."""
+
+    def predict_angle(self, a):
+        a = np.atleast_2d(a)
+        return 10.0 + 70.0 * a[:, 0] * (1.0 + a[:, 0]) - 20.0 * a[:, 1]
+
+    def angle_gradient(self, a):
+        a = np.atleast_2d(a)
+        g = np.zeros_like(a)
+        g[:, 0], g[:, 1] = 70.0 + 140.0 * a[:, 0], -20.0
+        return g
+
+
+def test_activation_model_warns_and_records_where_max_knots_stopped_the_bisection():
+    problem = InverseProblem(_ToyAngle(), n_candidates=64)
+    with pytest.warns(RuntimeWarning, match=r"max_knots = 7 with \d+ interval\(s\).*worst .*tolerance 0.00025"):
+        model = AngleActivationModel.build(problem, spacing_deg=35.0, max_knots=7)
+    unconverged = model.metadata["unconverged_intervals"]
+    assert unconverged and all(u["disagreement"] > 2.5e-4 for u in unconverged)
+    assert all(u["from_deg"] < u["to_deg"] for u in unconverged)
+    with pytest.warns(RuntimeWarning, match="none checked"):  # the initial knots already reach the cap
+        capped = AngleActivationModel.build(problem, spacing_deg=35.0, max_knots=3)
+    assert [u["disagreement"] for u in capped.metadata["unconverged_intervals"]] == [None] * 4
+    # without the cap the same model converges and says so
+    assert AngleActivationModel.build(problem, spacing_deg=35.0).metadata["unconverged_intervals"] == []
+
+
+def test_inverse_prefers_successful_starts_and_flags_targets_where_none_succeeded(monkeypatch):
+    from persival.surrogate import inverse
+
+    problem = InverseProblem(_ToyAngle(), n_candidates=64)
+    real = inverse.minimize
+    calls = []
+
+    def odd_ones_fail(*args, **kwargs):  # failed starts keep the optimum, successful ones are pushed off it
+        result = real(*args, **kwargs)
+        calls.append(None)
+        if len(calls) % 2:
+            result.success, result.message = False, "Iteration limit reached"
+        else:
+            result.x = np.clip(result.x + 0.05, 0.0, 1.0)
+        return result
+
+    monkeypatch.setattr(inverse, "minimize", odd_ones_fail)
+    solution = problem.solve([80.0])
+    assert solution.converged.all() and solution.rows()[0]["converged"] is True
+    assert abs(solution.achieved_deg[0] - 80.0) > 1.0  # the pushed-off successful start, not the failed optimum
+
+    def all_fail(*args, **kwargs):
+        result = real(*args, **kwargs)
+        result.success, result.message = False, "Iteration limit reached"
+        return result
+
+    monkeypatch.setattr(inverse, "minimize", all_fail)
+    with pytest.warns(RuntimeWarning, match=r"2 of 2 .*: 80 deg \(Iteration limit reached\); 120 deg"):
+        solution = problem.solve([80.0, 120.0])
+    assert [r["converged"] for r in solution.rows()] == [False, False]
+    assert np.abs(solution.achieved_deg - [80.0, 120.0]).max() < 0.1  # still the best of the failed starts

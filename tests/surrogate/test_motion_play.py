@@ -91,7 +91,8 @@ def test_csv_recording_with_a_load(motion_export, tmp_path):
     assert np.abs(table["velocity_deg_s"][inside] - v_true[inside]).max() < 0.5
     # the activations are the motion model's for (angle, velocity, acceleration, 1 kg), float32 apart
     table_file = Path(__file__).parents[1] / "data" / "moments_coarse.npz"
-    model = MotionActivationModel.build(MomentTable.load(table_file, load_model_file(None)[1], complete=True))
+    spec, model_hash = load_model_file(None)
+    model = MotionActivationModel.from_table(MomentTable.load(table_file, model_hash, complete=True), spec)
     rows = np.column_stack([table["target_deg"], table["velocity_deg_s"], table["acceleration_deg_s2"],
                             np.ones(len(table))])
     expected, feasible = model.predict(rows)

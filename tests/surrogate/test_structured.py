@@ -2,7 +2,7 @@
 elbow's equilibrium solved inside the exported graph.
 
 Fitted to the coarse response-table fixture (tests/data/response_table_coarse, see
-tests/test_response_table.py); the root search is also checked on a synthetic balance with two
+tests/tables/test_response_table.py); the root search is also checked on a synthetic balance with two
 stable roots.
 """
 
@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 import torch
 
-from persival.surrogate.structured.moment_model import ExternalMoments, MomentModel
+from persival.model.external_moments import ExternalMoments
+from persival.surrogate.structured.moment_model import MomentModel
 from persival.vocabulary import MUSCLES
 
 FIXTURE = Path(__file__).parents[1] / "data" / "response_table_coarse"

@@ -14,15 +14,14 @@ interval the whole balance is one cubic polynomial in theta. The elbow angle is 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from scipy.optimize import brentq
 
+from persival.model.external_moments import ExternalMoments
 from persival.surrogate.structured.cardinal import hermite_weights, spline_weights
 from persival.vocabulary import MUSCLES
 
-__all__ = ["ExternalMoments", "MomentModel", "consistent_slopes", "ROOT_GRID_DEG", "NEWTON_SLOPE_CAP", "NEWTON_STEPS"]
+__all__ = ["MomentModel", "consistent_slopes", "ROOT_GRID_DEG", "NEWTON_SLOPE_CAP", "NEWTON_STEPS"]
 
 ROOT_GRID_DEG = 0.5  # largest spacing of the sign scan that brackets the stable root
 # Newton steps on the bracket's cubic after regula falsi: the start is within 7e-3 deg, the
@@ -32,42 +31,6 @@ NEWTON_STEPS = 2
 # a Newton step divides by min(slope, this): where the balance does not descend (no Newton step
 # towards the stable root) the step leaves the bracket and is cut back to its end on the root's side
 NEWTON_SLOPE_CAP = -1e-12
-
-
-@dataclass(frozen=True)
-class ExternalMoments:
-    """Gravity on forearm, hand and load, and the passive joint moment (N mm, flexion positive)."""
-
-    mass_kg: float
-    centre_of_mass_mm: float
-    hand_distance_mm: float
-    gravity_m_s2: float
-    limit_moment: float
-    limits_deg: tuple[float, float]
-    limit_width_deg: float
-
-    @classmethod
-    def of_arm(cls, spec) -> ExternalMoments:
-        fa, j = spec.forearm, spec.joint
-        return cls(fa.mass, fa.centre_of_mass, fa.hand_distance, fa.gravity, j.limit_moment, tuple(j.limits_deg),
-                   j.limit_width_deg)
-
-    def lever(self, load_kg) -> np.ndarray:
-        """g (m r_com + load d): gravity's moment is -lever sin(theta) (N mm)."""
-        return self.gravity_m_s2 * (self.mass_kg * self.centre_of_mass_mm + np.asarray(load_kg) * self.hand_distance_mm)
-
-    def value(self, theta_deg, load_kg=0.0) -> np.ndarray:
-        lo, hi = self.limits_deg
-        w = self.limit_width_deg
-        joint = self.limit_moment * (np.exp((lo - theta_deg) / w) - np.exp((theta_deg - hi) / w))
-        return -self.lever(load_kg) * np.sin(np.radians(theta_deg)) + joint
-
-    def slope(self, theta_deg, load_kg=0.0) -> np.ndarray:
-        """d/dtheta per degree."""
-        lo, hi = self.limits_deg
-        w = self.limit_width_deg
-        joint = -self.limit_moment / w * (np.exp((lo - theta_deg) / w) + np.exp((theta_deg - hi) / w))
-        return -self.lever(load_kg) * np.cos(np.radians(theta_deg)) * (np.pi / 180.0) + joint
 
 
 class MomentModel:
@@ -178,14 +141,13 @@ class MomentModel:
         return {"angles_deg": self.angles_deg, "levels": self.levels, "moment_data": self.data}
 
     def parameters(self) -> dict:
-        e = self.external
-        return {"near_deg": self.near_deg, "external": {**e.__dict__, "limits_deg": list(e.limits_deg)}}
+        return {"near_deg": self.near_deg, "external": self.external.as_dict()}
 
     @classmethod
     def from_arrays(cls, arrays: dict, parameters: dict) -> MomentModel:
         n_t = len(arrays["angles_deg"])
         data = arrays["moment_data"]
-        external = ExternalMoments(**{**parameters["external"], "limits_deg": tuple(parameters["external"]["limits_deg"])})
+        external = ExternalMoments.from_dict(parameters["external"])
         return cls(arrays["angles_deg"], arrays["levels"], data[:, :n_t], data[:, n_t:] * (180.0 / np.pi), external,
                    parameters["near_deg"])
 

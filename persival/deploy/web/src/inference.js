@@ -182,7 +182,7 @@ export class ServerEngine {
     });
   }
 
-  deform(activations, tier = 'float32') {
-    return this.request({ activations: Array.from(activations), tier });
+  deform(activations, tier = 'float32', load = 0) {
+    return this.request({ activations: Array.from(activations), tier, ...(load ? { load_kg: load } : {}) });
   }
 }

@@ -268,8 +268,8 @@ class Viewer {
     const ta = performance.now();
     const next = await this.activationsForState();
     const t0 = performance.now();
-    // the server's deformation is fed activations only: a loaded state of a load-taking model is computed here
-    const local = this.place === 'wasm' || (this.loadInput && next.load > 0);
+    // one contract on both places: the server's deformation is fed the same load (SPEC 9)
+    const local = this.place === 'wasm';
     const r = await (local ? this.local : this.server).deform(next.drawn, local && this.loadInput ? 'float32' : this.tier, next.load);
     const ms = performance.now() - t0;
     this.prof.activationsMs += t0 - ta;
@@ -354,7 +354,9 @@ window.persival = {
   viewer,
   async predict(a, loadKg = 0) { return Float32Array.from((await localState(a, loadKg)).positions); },
   async predictAngle(a, loadKg = 0) { return (await localState(a, loadKg)).angle; },
-  async predictServer(a) { return Float32Array.from((await viewer.server.deform(Float32Array.from(a), 'float32')).positions); },
+  async predictServer(a, loadKg = 0) { return Float32Array.from((await viewer.server.deform(Float32Array.from(a), 'float32', loadKg)).positions); },
+  // (angle, load) -> activations, as the page computes them for setAngle (the contract's second half)
+  activationsFor: (deg, load = 0) => viewer.drawnFor([deg], [load]),
   setActivations: (a) => viewer.setActivations(a),
   setAngle: (deg, load) => viewer.setAngle(deg, load),
   setLoad: (kg) => viewer.controls.setLoad(kg),
