@@ -170,7 +170,29 @@ def test_stable_root_nearest_the_hanging_arm_of_a_balance_with_two():
     assert abs(found[50.0] - 60.0) < 0.5 and 150.0 < found[130.0] < 160.0
 
 
-def _moment_graph(model):
+def test_a_balance_without_a_root_presses_to_its_end_in_float32_too():
+    """Where the balance flexes (or extends) at every angle there is no stable root: the arm is
+    pressed to the table's last (first) angle, in numpy, in the float64 graph and in the float32
+    graph that ships (its fallback rank once lost the index in float32's rounding)."""
+    angles = np.arange(-10.0, 160.0 + 1e-9, 5.0)
+    levels = np.array([0.0, 0.5, 1.0])
+    moments = np.zeros((5, len(angles), 3))
+    slopes = np.zeros_like(moments)
+    moments[0] = 1e5 * levels  # a biceps that out-pulls gravity and both limits
+    moments[3] = -1e5 * levels  # a triceps that out-pushes them
+    external = ExternalMoments(1.6, 150.0, 330.0, 9.81, 500.0, (0.0, 160.0), 10.0)
+    model = MomentModel(angles, levels, moments, slopes, external, 30.0)
+    alpha = np.array([[1.0, 0, 0, 0, 0], [0, 0, 0, 1.0, 0]])
+    expected = np.array([160.0, -10.0])
+    assert np.allclose(model.equilibrium(alpha), expected)
+    for dtype in (torch.float64, torch.float32):
+        graph = _moment_graph(model, dtype)
+        with torch.no_grad():
+            _, theta = graph(torch.as_tensor(alpha, dtype=dtype), torch.zeros(2, 1, dtype=dtype))
+        assert np.allclose(theta[:, 0].numpy(), expected, atol=1e-3), (dtype, theta)
+
+
+def _moment_graph(model, dtype=torch.float64):
     """The graph of a moment model with a one-node 'surface' per muscle (nothing to shape)."""
     from persival.surrogate.structured.graph import StructuredGraph
     from persival.surrogate.structured.shape_model import MuscleShape
@@ -180,7 +202,7 @@ def _moment_graph(model):
     rotation = np.concatenate([eye, np.zeros_like(eye)])
     shapes = [MuscleShape(name, np.zeros(3), np.zeros(3), np.zeros((1, 3)), np.zeros((n_t2, n_a, 1)), rotation, {})
               for name in MUSCLES]
-    return StructuredGraph(model, shapes, torch.float64)
+    return StructuredGraph(model, shapes, dtype)
 
 
 def test_export_runs_in_onnxruntime_with_and_without_the_load(fitted, tmp_path):

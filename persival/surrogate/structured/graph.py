@@ -22,7 +22,10 @@ from persival.surrogate.structured.moment_model import NEWTON_SLOPE_CAP, NEWTON_
 
 __all__ = ["StructuredGraph"]
 
-_FAR = 1e9  # distance of a scan interval without a stable root
+# Rank of a scan interval without a stable root: behind every real distance (at most 360 deg), and
+# among themselves by index, first or last. 1e4 +- index is exact in float32 (integers below 2^24
+# are, and 1e4 + 1e4 is far below); at 1e9 float32 numbers are 64 apart and the index was lost.
+_FAR = 1e4
 
 
 class StructuredGraph(torch.nn.Module):
@@ -56,6 +59,8 @@ class StructuredGraph(torch.nn.Module):
         grid, interval = moments.scan_deg, moments.scan_interval
         self.scan_weights = as_t(moments.scan_weights.T)  # (2 n_t, n_g)
         self.scan_distance = as_t(np.abs(grid[:-1] - moments.near_deg))
+        if len(grid) >= _FAR - 360.0:
+            raise ValueError(f"a sign scan of {len(grid)} angles does not fit the fallback's rank {_FAR:g} (float32)")
         self.scan_index = torch.as_tensor(np.arange(len(grid) - 1), dtype=dtype)
         start = basis.breaks[interval]
         self.scan_ends = as_t(np.stack([grid[:-1] - start, grid[1:] - start, start], axis=1))  # (n_g - 1, 3)
