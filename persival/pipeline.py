@@ -16,8 +16,10 @@
    14 report    OUT/report/    index.html + results.json
 
 Resumable stage by stage: every stage leaves ``OUT/<stage>/stage.json`` with the digest of its
-inputs (its own settings plus the digests of the stages it reads); a stage whose digest is
-unchanged is skipped. An interrupted campaign stage (killed, or stopped by states that failed)
+inputs (its own settings, the model file's content hash, the physics and package versions, and
+the digests of the stages it reads); a stage whose digest is unchanged is skipped, so an edited
+model file, a new physics version or another release of the code reruns exactly the stages after
+it. An interrupted campaign stage (killed, or stopped by states that failed)
 is resumed where it stopped by the next run with the same settings. The campaign's simulator is
 named everywhere its numbers appear.
 """
@@ -40,7 +42,7 @@ __all__ = ["RunConfig", "run", "STAGES"]
 class RunConfig:
     profile: str = "quick"
     model: str | None = None  # model file (absolute path); None: the built-in arm
-    model_hash: str | None = None  # its hash (text and surface files): what the stages' digests see of it
+    model_hash: str | None = None  # its hash (text, surface files, physics version); None: `run` computes it
     simulator: str = "arm"  # the FE arm from its response tables; "analytic": the closed-form stand-in (tests)
     level: int = 1  # sparse-grid level of the campaign (1: 243 states, 2: 1053)
     held_out: int = 25  # random states of the same simulator for the error-propagation table
@@ -80,9 +82,6 @@ STAGES = [
 ]
 
 
-#: settings that are part of a stage's digest only when set
-OPTIONAL_SETTINGS = {"model_hash"}
-
 #: stages whose folder is not named after them
 FOLDERS = {"train": "networks"}
 
@@ -95,13 +94,21 @@ def _digest(obj) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
+def code_versions() -> dict:
+    """What of the code every stage's result depends on: the package release and the physics version."""
+    import persival
+    from persival.model.arm_file import PHYSICS_VERSION
+
+    return {"persival": persival.__version__, "physics": PHYSICS_VERSION}
+
+
 def _stage_inputs(name: str, config: RunConfig, done: dict) -> dict:
     keys = stages.SETTINGS[name]
     upstream = dict((s[0], s[2]) for s in STAGES)[name]
-    # a model file is an input only when given: the built-in arm's digests stay as they were
-    settings = {k: getattr(config, k) for k in keys if k not in OPTIONAL_SETTINGS or getattr(config, k) is not None}
+    settings = {k: getattr(config, k) for k in keys}
     # a stage left out of this run (fe with --no-fe-states) is no input
-    return {"settings": settings, "upstream": {u: done[u]["digest"] for u in upstream if u in done}}
+    return {"settings": settings, "code": code_versions(),
+            "upstream": {u: done[u]["digest"] for u in upstream if u in done}}
 
 
 def run(out: str | Path, config: RunConfig | None = None, console=None) -> dict:
@@ -109,6 +116,12 @@ def run(out: str | Path, config: RunConfig | None = None, console=None) -> dict:
     from rich.console import Console
 
     config = config or RunConfig()
+    if config.model_hash is None:  # the model file's content is an input of every stage that reads it
+        from dataclasses import replace
+
+        from persival.model.arm_file import load_model_file
+
+        config = replace(config, model_hash=load_model_file(config.model)[1])
     console = console or Console()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -57,7 +57,7 @@ def register(app: typer.Typer) -> None:
                 raise ValueError("--model needs --simulator arm (the analytic stand-in has no model file)")
             config = RunConfig(profile=profile, simulator=simulator,
                                model=None if model is None else str(resolve_model_path(model).resolve()),
-                               model_hash=None if model is None else frame.model_hash, level=level, held_out=held_out,
+                               model_hash=frame.model_hash, level=level, held_out=held_out,
                                campaign_store=None if campaign_store is None else str(campaign_store.resolve()),
                                held_out_store=None if held_out_store is None else str(held_out_store.resolve()),
                                moment_table=None if moment_table is None else str(moment_table.resolve()),

@@ -123,10 +123,15 @@ def coarse_arm():
     return ArmModel(profile="coarse")
 
 
+#: the commands that rebuild the coarse fixtures (tests/data/README.md)
+REBUILD_TABLES = ("persival tables --profile coarse --angles 0:160:20 --levels 0,0.5,1 --out tests/data/response_table_coarse"
+                  " --moments-out tests/data/moments_coarse.npz")
+
+
 @pytest.fixture(scope="module")
 def coarse_table(coarse_arm):
-    """The coarse response-table fixture (tests/data/README.md), or a skip naming the mismatch
-    when the model or mesh changed since it was built."""
+    """The coarse response-table fixture (tests/data/README.md); a failure naming the command that
+    rebuilds it when the model or mesh changed since it was built (a skip would hide the tests it feeds)."""
     from persival.model.state_cache import mesh_fingerprint
     from persival.tables.moment_table import TableMismatchError
     from persival.tables.response_table import ResponseTable
@@ -134,5 +139,5 @@ def coarse_table(coarse_arm):
     try:
         return ResponseTable.open(COARSE_TABLE, coarse_arm.model_hash, "coarse", mesh_fingerprint(coarse_arm.mesh))
     except TableMismatchError as exc:
-        pytest.skip(f"the fixture is of another model or mesh ({exc}); rebuild it as tests/data/README.md says")
+        pytest.fail(f"the fixture is of another model or mesh ({exc}); rebuild it: {REBUILD_TABLES}")
 

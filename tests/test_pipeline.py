@@ -116,3 +116,38 @@ def test_a_user_error_half_way_keeps_the_stages_that_finished(tmp_path, monkeypa
         assert out.exists() is kept
         if kept:
             assert (out / "model" / "stage.json").exists() and not (out / "tables" / "stage.json").exists()
+
+
+def test_an_edited_model_file_or_a_new_physics_version_reruns_every_stage_from_the_model(tmp_path, monkeypatch):
+    """Results never go stale: the digests hold the built-in model file's content hash, the
+    physics version and the package version (the stages themselves are stand-ins here)."""
+    from rich.console import Console
+
+    import persival
+    import persival.model.arm_file as arm_file
+    import persival.model.defaults as defaults
+    from persival import stages
+
+    model = tmp_path / "default_arm.toml"
+    model.write_text(defaults.default_model_path().read_text())
+    monkeypatch.setattr(defaults, "default_model_path", lambda: model)
+    ran = []
+    monkeypatch.setattr(stages, "RUNNERS", {name: (lambda out, config, console, name=name: ran.append(name) or {})
+                                            for name in stages.RUNNERS})
+    config = RunConfig(simulator="analytic", fe_states=False)
+    names = [s[0] for s in STAGES if s[0] != "fe"]
+
+    def again() -> list[str]:
+        ran.clear()
+        run(tmp_path / "out", config, Console(quiet=True))
+        return list(ran)
+
+    assert again() == names
+    assert again() == []
+    model.write_text(model.read_text().replace("mass = 1.6", "mass = 1.7", 1))  # the forearm's geometry and load
+    assert again() == names
+    monkeypatch.setattr(arm_file, "PHYSICS_VERSION", arm_file.PHYSICS_VERSION + 1)
+    assert again() == names
+    assert again() == []
+    monkeypatch.setattr(persival, "__version__", persival.__version__ + ".post1")
+    assert again() == names

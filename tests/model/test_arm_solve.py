@@ -42,12 +42,14 @@ DIRECT = [0.45, 0.1, 0.15, 0.05, 0.1]
 
 @pytest.fixture(scope="module")
 def tables(arm):
-    """The exact path on the fixture tables; None when the fixture is of another model or mesh
-    (then every state comes from the direct solve: slower, same states)."""
+    """The exact path on the fixture tables; a fixture of another model or mesh fails with the
+    command that rebuilds it."""
+    from conftest import REBUILD_TABLES
+
     try:
         return TableSolver(arm, ResponseTable.open(FIXTURE, arm.model_hash, "coarse", mesh_fingerprint(arm.mesh)))
-    except TableMismatchError:
-        return None
+    except TableMismatchError as exc:
+        pytest.fail(f"the response-table fixture is of another model or mesh ({exc}); rebuild it: {REBUILD_TABLES}")
 
 
 @pytest.fixture(scope="module")
@@ -56,8 +58,6 @@ def states(arm, tables):
     half = arm.solve(DIRECT, warm_start=hanging, progress=REPORTS.append)
 
     def solve(alpha):
-        if tables is None:
-            return arm.solve(alpha, warm_start=half)
         return tables.solve(alpha, near_deg=half.elbow_angle_deg)
 
     return hanging, half, solve([1.0, 0, 0, 0, 0]), solve([0.5, 0, 0, 0.5, 0])
@@ -66,8 +66,6 @@ def states(arm, tables):
 def test_exact_path_on_the_tables_is_the_direct_solve(arm, tables, states):
     """Same converged FE state by both paths for activations off the table's levels (Newton from
     the neighbouring levels' states): theta within 0.05 deg, every node within 0.01 mm."""
-    if tables is None:
-        pytest.skip("the response-table fixture is of another model or mesh: rebuild it (tests/data/README.md)")
     direct = states[1]
     assert not np.isin(direct.activations, tables.table.levels).any()
     exact = tables.solve(direct.activations, near_deg=states[0].elbow_angle_deg)
