@@ -195,14 +195,21 @@ def export(out: Path, config, console) -> dict:
 
 
 def _contract_check(folder: Path, console) -> dict:
-    """(angle, load) -> activations -> the deployed model's angle, on random requests (SPEC 5, 9)."""
+    """(angle, load) -> activations -> the deployed model's angle, on random requests (SPEC 5, 9);
+    kept in metadata.json's provenance.deployed (the report's results.json repeats it)."""
+    import json
+
     from persival.deploy.artifacts import DeployedModel
     from persival.deploy.contract import angle_requests, check_angle_contract
 
     model = DeployedModel(folder)
     result = check_angle_contract(model, angle_requests(model, 200, seed=0))
-    console.print(f"  contract: {result['requests']} random (angle, load) requests -> the deployed model's angle within "
-                  f"{result['max_angle_error_deg']:.3f} deg (mean {result['mean_angle_error_deg']:.3f})")
+    meta = json.loads((folder / "metadata.json").read_text())
+    meta["provenance"].setdefault("deployed", {})["angle_contract"] = result
+    (folder / "metadata.json").write_text(json.dumps(meta, default=float))
+    console.print(f"  contract: {result['requests']} random (angle, load up to {result['max_load_kg']:.2f} kg) requests -> "
+                  f"the deployed model's angle within {result['max_angle_error_deg']:.3f} deg "
+                  f"(mean {result['mean_angle_error_deg']:.3f})")
     return result
 
 

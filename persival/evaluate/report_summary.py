@@ -76,7 +76,9 @@ def headline(out: str | Path, tables: dict) -> dict:
         or "deployed model"
     viewer = next((s for s in VIEWER_SHOTS if (out / s).is_file()), None)
     paper_nn = next(r for r in paper_values.ERROR_PROPAGATION if "NN" in r["surrogate"])
+    contract = (meta.get("provenance", {}).get("deployed") or {}).get("angle_contract")
     return {"deployed_model": name, "nodes": meta.get("n_nodes"), "held_out": _held_out(meta, name, tables),
+            "angle_contract": contract,
             "paper_held_out": {"max_ae_mm": paper_nn["max MaxAE_mm"], "mae_mm": paper_nn["mean MAE_mm"],
                                "states": paper_nn["states"], "scope": "biceps, the paper's arm"},
             "speed": _speed(tables), "size": _size(meta, tables),
@@ -98,6 +100,13 @@ def headline_html(summary: dict, image) -> str:
                      f"{_f(held.get('mae_mm'), '{:.2f}', ' mm')}, worst elbow-angle error "
                      f"{_f(held.get('max_angle_error_deg'), '{:.2f}', ' deg')} (all muscles)",
                      f"{paper['max_ae_mm']:.2f} mm / {paper['mae_mm']:.2f} mm ({paper['scope']}, {paper['states']} FE states)"))
+    contract = summary.get("angle_contract")
+    if contract:
+        rows.append(("the angle asked for (with a load in the hand) against the angle shown",
+                     f"within {contract['max_angle_error_deg']:.2f} deg (mean {contract['mean_angle_error_deg']:.3f}) "
+                     f"on {contract['requests']} random requests, {contract['angle_range_deg'][0]:.0f}-"
+                     f"{contract['angle_range_deg'][1]:.0f} deg, loads up to {contract['max_load_kg']:.2f} kg",
+                     "not reported"))
     if speed:
         here = (f"; the paper's architecture as TFLite here: {speed['tflite_peer_here_ms']:.2f} ms, "
                 f"{speed['speedup_vs_peer_here']:.0f}x slower") if speed.get("tflite_peer_here_ms") else ""
