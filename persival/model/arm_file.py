@@ -398,7 +398,9 @@ PHYSICS_VERSION = 2
 
 # Bumped whenever the code that turns a surface file into a mesh (repair, placement, meshing,
 # Laplace fibres) changes what it gives, for the same reason as PHYSICS_VERSION.
-SURFACE_VERSION = 2  # 2: the Laplace centre line smoothed
+# 3: cells with no Laplace gradient (past an attachment face) take the centre line's direction,
+# not a leaked gradient or NaN; and a mesh cached with those NaN fibres must not be reused.
+SURFACE_VERSION = 3  # 2: the Laplace centre line smoothed
 
 
 def model_hash(text: str, surfaces: dict[str, bytes] | None = None) -> str:

@@ -122,4 +122,7 @@ def _print_mesh_report(console, report: dict, out: Path) -> None:
         if e["surface"]:
             done = ", ".join(f"{k} {v}" for k, v in e["repairs"].items() if v) or "nothing to repair"
             console.print(f"{name} repairs: {done}")
+        if e.get("fibre_fallback_cells"):
+            console.print(f"{name} fibres: {e['fibre_fallback_cells']} cells with no Laplace gradient (past an attachment "
+                          "face, or in a lobe neither face reaches) run along the centre line")
     console.print(f"wrote {out}: <muscle>.vtu, <muscle>_surface.vtp, <muscle>.png, mesh_report.json")

@@ -5,8 +5,9 @@ muscle_fraction; point data laplace), ``<muscle>_surface.vtp`` (the mesh's bound
 laplace, attachment: 0 none / 1 origin / 2 insertion, source_vertex: the index of the surface
 file's vertex at that node, -1 for none), ``<muscle>.png`` (the fibre field,
 persival.model.fibre_picture) and one ``mesh_report.json`` for all of them: vertices in, nodes
-out, each repair with its count, volume, area, tetrahedra, minimum quality, scale, meshing time
-and the line of action's moment arm. A built-in muscle (no surface) is meshed as the arm meshes
+out, each repair with its count, volume, area, tetrahedra, minimum quality, scale, meshing time,
+the cells whose fibre is the centre line's (no Laplace gradient there) and the line of action's
+moment arm. A built-in muscle (no surface) is meshed as the arm meshes
 it (a swept solid with centre-line fibres) and reported the same way, without the surface's rows.
 """
 
@@ -38,22 +39,26 @@ def tissue_regions(muscle: Muscle, position: np.ndarray, length: float) -> tuple
 
 def mesh_muscles(body: ArmBody, muscles: tuple[str, ...], out: Path, progress=None) -> dict:
     """Mesh ``muscles`` of a model's frame (ArmBody.frame) and write their files into ``out``;
-    returns the report (also written as mesh_report.json)."""
+    returns the report (also written as mesh_report.json). Every muscle is meshed before anything
+    is written: one that is refused (a MeshError) leaves no files of the others behind either."""
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     report = {"model": body.spec.name, "model_hash": body.model_hash, "profile": body.profile, "muscles": {}}
+    writers = []
     for name in muscles:
         if progress is not None:
             progress(name)
         muscle = body.spec.muscle(name)
-        report["muscles"][name] = _mesh_one(body, muscle, out)
+        report["muscles"][name], write = _mesh_one(body, muscle)
+        writers.append(write)
+    out.mkdir(parents=True, exist_ok=True)
+    for write in writers:
+        write(out)
     (out / "mesh_report.json").write_text(json.dumps(report, indent=2))
     return report
 
 
-def _mesh_one(body: ArmBody, muscle: Muscle, out: Path) -> dict:
-    from persival.model.fibre_picture import draw_fibres
-
+def _mesh_one(body: ArmBody, muscle: Muscle):
+    """The muscle's report entry and the function that writes its files into a folder."""
     size = body.spec.mesh_size(body.profile, muscle.name)
     t0 = time.perf_counter()
     entry: dict = {}
@@ -71,7 +76,8 @@ def _mesh_one(body: ArmBody, muscle: Muscle, out: Path) -> dict:
                      scale=placed.scale, end_point_distance_mm=list(placed.end_distance_mm),
                      length_between_points_mm=float(np.linalg.norm(placed.insertion - placed.origin)),
                      origin_insertion_mm=float(np.linalg.norm(placed.target_insertion - placed.origin)),
-                     min_quality=volume.min_quality, straightened_elements=volume.straightened)
+                     min_quality=volume.min_quality, straightened_elements=volume.straightened,
+                     fibre_fallback_cells=len(own.fibres.fallback))
     else:
         line = body.centre_line(muscle)
         length = body.centre_line_length(muscle)
@@ -87,10 +93,15 @@ def _mesh_one(body: ArmBody, muscle: Muscle, out: Path) -> dict:
         region_volume_mm3={REGIONS[k]: float(_cell_volumes(mesh)[region == k].sum()) for k in REGIONS},
         moment_arm_mm={f"{theta:g} deg": body.line_moment_arm(muscle, theta) for theta in (muscle.mesh_angle_deg, 90.0)},
     )
-    _write_vtu(mesh, gamma, region, phi_nodes, out / f"{muscle.name}.vtu")
-    _write_surface(mesh, phi_nodes, source, out / f"{muscle.name}_surface.vtp")
-    draw_fibres(mesh, line, muscle.name, out / f"{muscle.name}.png", body.axis)
-    return entry
+
+    def write(out: Path) -> None:
+        from persival.model.fibre_picture import draw_fibres
+
+        _write_vtu(mesh, gamma, region, phi_nodes, out / f"{muscle.name}.vtu")
+        _write_surface(mesh, phi_nodes, source, out / f"{muscle.name}_surface.vtp")
+        draw_fibres(mesh, line, muscle.name, out / f"{muscle.name}.png", body.axis)
+
+    return entry, write
 
 
 def _cell_volumes(mesh: Tet10Mesh) -> np.ndarray:

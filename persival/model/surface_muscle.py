@@ -20,11 +20,12 @@ from persival.model.mesh import MeshError, Tet10Mesh
 from persival.model.surface_import import PlacedSurface, place_surface
 from persival.model.surface_mesh import VolumeMesh, volume_mesh
 
-__all__ = ["SurfaceMuscle", "attachment_face", "place_muscle_surface", "surface_muscle", "MIN_FACE_CORNERS"]
+__all__ = ["SurfaceMuscle", "attachment_face", "check_fibres", "place_muscle_surface", "surface_muscle", "MIN_FACE_CORNERS"]
 
 # An attachment face needs a patch, not a point (a clamped point leaves the body free to spin
 # about it): at least a vertex and its ring of neighbours on a coarse surface.
 MIN_FACE_CORNERS = 7
+NAMED_CELLS = 5  # cells a refusal lists by index
 
 
 @dataclass
@@ -54,9 +55,25 @@ def surface_muscle(muscle: Muscle, placed: PlacedSurface, mesh_size: float) -> S
         raise MeshError(f"muscle {muscle.name!r}: its origin and insertion faces touch; the surface is too short "
                         "or too coarse for its tendon radii")
     fibres = laplace_fibres(mesh, origin_nodes, insertion_nodes, ends=(placed.origin, placed.insertion))
+    check_fibres(fibres.fibre, fibres.position, f"muscle {muscle.name!r}")
     mesh.node_sets = {"origin": origin_nodes, "insertion": insertion_nodes}
     mesh.cell_data = {"fibre": fibres.fibre, "arclength": fibres.position, "laplace": fibres.phi}
     return SurfaceMuscle(mesh, placed, volume, fibres)
+
+
+def check_fibres(fibre: np.ndarray, position: np.ndarray, name: str) -> None:
+    """Refuse (MeshError) a muscle whose cells lack a finite unit fibre or a finite position,
+    naming the first cells and the count: the solver stops on them later with no word of where,
+    and ``persival mesh`` would write them as NaN. The Laplace fibres give every cell one
+    (persival.model.laplace_fibres: its fallbacks), so this guards against what nothing foresaw."""
+    fibre, position = np.asarray(fibre, dtype=float), np.asarray(position, dtype=float)
+    unit = np.abs(np.linalg.norm(fibre, axis=1) - 1.0) < 1e-6  # NaN compares False: not unit
+    bad = np.flatnonzero(~(unit & np.isfinite(position)))
+    if len(bad):
+        cells = ", ".join(str(c) for c in bad[:NAMED_CELLS]) + (", ..." if len(bad) > NAMED_CELLS else "")
+        raise MeshError(f"{name}: no finite fibre direction or position for {len(bad)} of {len(fibre)} cells "
+                        f"(cells {cells}); check its origin_point, insertion_point and tendon_radius, or simplify the "
+                        "surface where those cells lie")
 
 
 def attachment_face(mesh: Tet10Mesh, point: np.ndarray, radius: float) -> np.ndarray:
