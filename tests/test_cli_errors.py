@@ -37,6 +37,7 @@ CASES = [
     ("sections", ["nosuch", "--out", "new.png"], "missing state folder", "not a state directory"),
     ("sections", ["folder", "--heights", "a,b", "--out", "new.png"], "malformed heights", "comma-separated numbers"),
     ("simulate", ["-a", "0,0,0,0,0", "--angle", "170", "--out", "new"], "held angle beyond the joint", "joint limits"),
+    ("simulate", ["-a", "0,0,0,0,0", "--load", "-1", "--out", "new"], "negative load in the hand", "--load must be"),
     ("anatomy", ["nosuch"], "missing state folder", "not a state directory"),
     ("anatomy", ["folder", "--store", "random.zarr"], "state folders and a store", "one of the four"),
     ("anatomy", ["--run", "folder"], "a run folder with no FE states", "no FE states"),

@@ -331,6 +331,7 @@ class ArmModel(ArmStateCache, ArmBody):
         stats["contact_force_N"] = {name: s.contact_force for name, s in states.items() if s.contact_force}
         stats["joint_stiffness_Nmm_per_rad"] = float(dg)
         stats["moment_tolerance_Nmm"] = self.moment_tolerance(states)
+        stats["hand_load_kg"] = self.hand_load_kg
         return ArmState(
             activations=np.asarray(target, dtype=float).copy(),
             elbow_angle_deg=theta,

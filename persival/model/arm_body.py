@@ -229,11 +229,16 @@ class ArmBody(ArmKinematics):
         """K [exp((theta_min - theta)/w) - exp((theta - theta_max)/w)]: stiffens beyond the limits."""
         return float(self.external.joint(theta_deg))
 
+    #: kg held in the hand (at the forearm's hand_distance): part of the hinge's external moment.
+    #: Each muscle's state depends on (theta, its activation) only, so a load changes the joint's
+    #: equilibrium and nothing cached per muscle (docs/theory.md, 3.6).
+    hand_load_kg: float = 0.0
+
     def external_moment(self, theta_rad: float) -> tuple[float, float]:
-        """Gravity + passive joint moment and its derivative per radian (the hinge's load)."""
+        """Gravity (with the hand's load) + passive joint moment and its derivative per radian (the hinge's load)."""
         theta = np.degrees(theta_rad)
-        external = self.external
-        return float(external.value(theta)), float(external.slope(theta) * (180.0 / np.pi))
+        external, load = self.external, self.hand_load_kg
+        return float(external.value(theta, load)), float(external.slope(theta, load) * (180.0 / np.pi))
 
     def cell_activation(self, activations: np.ndarray) -> np.ndarray:
         return np.asarray(activations, dtype=float)[self.mesh.cell_data["muscle"]]

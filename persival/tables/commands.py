@@ -9,6 +9,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+import numpy as np
 import typer
 
 from persival.cli_errors import check_output_dir, check_output_file, user_errors
@@ -93,6 +94,8 @@ def simulate(
     angle: float | None = typer.Option(None, "--angle", help="Hold the elbow at this angle (deg; an isometric "
                                        "state: each muscle's FE equilibrium there, a brace takes the joint's moment; "
                                        "solved directly)."),
+    load: float = typer.Option(0.0, "--load", help="kg held in the hand (at the forearm's hand_distance); the "
+                               "joint's equilibrium carries it."),
 ) -> None:
     """Solve the FE arm for one activation vector (or hold it at --angle); write state.json and VTU files."""
     from rich.console import Console
@@ -109,12 +112,14 @@ def simulate(
             raise ValueError(f"--angle must lie within the joint limits [{lower:g}, {upper:g}] deg, got {angle:g}")
         if method not in ("auto", "tables", "direct"):
             raise ValueError(f"--method must be auto, tables or direct, got {method!r}")
+        if not (np.isfinite(load) and load >= 0.0):
+            raise ValueError(f"--load must be a finite number of kg >= 0, got {load:g}")
         check_output_dir(out)
     with user_errors(out=out):
         if angle is None:
-            state, arm, path = _solve_one(console, model, profile, method, alpha)
+            state, arm, path = _solve_one(console, model, profile, method, alpha, load)
         else:
-            state, arm = _hold_one(console, model, profile, alpha, angle)
+            state, arm = _hold_one(console, model, profile, alpha, angle, load)
             path = "held by a brace: the residual is its moment"
         from persival.model.output import write_state
 
@@ -127,7 +132,7 @@ def simulate(
     console.print(f"wrote {out}/state.json and VTU files (open {out}/*.vtu in ParaView)")
 
 
-def _solve_one(console, model, profile: str, method: str, alpha):
+def _solve_one(console, model, profile: str, method: str, alpha, load: float = 0.0):
     """(state, arm, 'tables' | 'direct') for one activation vector; a failed solve is a typer.Exit(3)."""
     from persival.model.arm import ArmModel
     from persival.model.progress import ConsoleProgress
@@ -144,6 +149,7 @@ def _solve_one(console, model, profile: str, method: str, alpha):
         except ConvergenceError as exc:
             typer.echo(f"error: the hanging arm (activations 0) did not converge: {exc}; nothing was written", err=True)
             raise typer.Exit(3) from None
+    arm.hand_load_kg = load  # after the hanging arm, the unloaded start every state continues from
     table = None
     if method != "direct":
         try:
@@ -163,14 +169,15 @@ def _solve_one(console, model, profile: str, method: str, alpha):
             raise typer.Exit(3) from None
 
 
-def _hold_one(console, model, profile: str, alpha, angle: float):
-    """(state, arm) of the arm held at ``angle``; a failed solve is a typer.Exit(3)."""
+def _hold_one(console, model, profile: str, alpha, angle: float, load: float = 0.0):
+    """(state, arm) of the arm held at ``angle`` (the brace also takes the hand's load); a failed solve is a typer.Exit(3)."""
     from persival.model.arm import ArmModel
     from persival.model.progress import ConsoleProgress
     from persival.model.solver import ConvergenceError
 
     with console.status("meshing the arm (gmsh, cached after the first run)"):
         arm = ArmModel(model, profile)
+    arm.hand_load_kg = load
     with console.status(f"activations {alpha} held at {angle:g} deg") as status, \
             ConsoleProgress(console, status, f"activations {alpha}") as report:
         try:

@@ -62,9 +62,10 @@ class TableSolver:
 
     # ------------------------------------------------------------------ joint equilibrium on the table
     def residual(self, theta_deg, activations) -> np.ndarray:
-        """sum_m M_m(theta, a_m) + M_gravity + M_joint (N mm; > 0 turns the forearm towards flexion)."""
+        """sum_m M_m(theta, a_m) + M_gravity (with the hand's load) + M_joint (N mm; > 0 turns the
+        forearm towards flexion; the arm's own external moments, docs/theory.md 3.6)."""
         theta = np.atleast_1d(np.asarray(theta_deg, dtype=float))
-        total = self.moments.gravity_moment(theta) + self.moments.passive_joint_moment(theta)
+        total = self.arm.external.value(theta, self.arm.hand_load_kg)
         for name, a in zip(MUSCLES, activations):
             total = total + self.moments.moment(name, theta, np.full(len(theta), a))
         return total
@@ -76,7 +77,7 @@ class TableSolver:
         # linear in a: np.interp reads only the two levels that bracket a (a NaN elsewhere stays out)
         g = sum(np.array([np.interp(a, self.moments.levels, row) for row in self._level_moments[name]])
                 for name, a in zip(MUSCLES, alpha))
-        g = g + self.moments.gravity_moment(self._fine) + self.moments.passive_joint_moment(self._fine)
+        g = g + self.arm.external.value(self._fine, self.arm.hand_load_kg)
         lo, hi = self._converged_span(g, near_deg)
         inside = (self._fine >= lo) & (self._fine <= hi)
         down = np.flatnonzero((g[:-1] > 0) & (g[1:] <= 0) & inside[:-1] & inside[1:])
