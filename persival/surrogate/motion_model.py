@@ -38,7 +38,7 @@ WINTER_GYRATION_RATIO = 0.827 / 0.682  # radius of gyration about the elbow / ce
 _ONNX_NAME = "activation_motion.onnx"
 _ANGLE_ONNX_NAME = "activation_angle.onnx"
 #: activations at which each muscle's moment is sampled for the least-effort solve (docs/theory.md, 6.4)
-ACTIVATION_SAMPLES = 33
+ACTIVATION_SAMPLES = 65
 
 
 def _response(V, levels, lam):
@@ -97,13 +97,14 @@ def least_effort(V, levels, required, iterations: int = 90):
 class MotionActivationModel:
     """``predict(motion (n, 4)) -> (activations (n, 5), feasible (n,))``; ONNX via ``export_onnx``."""
 
-    def __init__(self, theta_deg, s_grid, alpha, base, m_min, m_max, load_base, params: dict) -> None:
+    def __init__(self, theta_deg, s_grid, alpha, base, m_min, m_max, load_base, samples, params: dict) -> None:
         self.theta = np.asarray(theta_deg, float)  # (nT,) uniform
         self.s = np.asarray(s_grid, float)  # (nS,) uniform in [0, 1]
         self.alpha = np.asarray(alpha, float)  # (nT, nS, 5)
         self.base = np.asarray(base, float)  # (nT,) -(M_g + M_p), N mm
         self.m_min, self.m_max = np.asarray(m_min, float), np.asarray(m_max, float)  # (nT,) N mm
         self.load_base = np.asarray(load_base, float)  # (nT,) -M_load per kg in the hand, N mm
+        self.samples = np.asarray(samples, float)  # (nT, 5, J) M_m at J uniform activations, N mm
         self.params = dict(params)  # hand_distance_mm, gravity_m_s2, inertia_kg_mm2, ...
 
     @property
@@ -119,9 +120,9 @@ class MotionActivationModel:
 
         Each muscle's moment is sampled at ``n_activation`` activations of the balance's own
         interpolation in a (a cubic spline through the table's levels): the least-effort solver
-        works on the piecewise-linear interpolant of these samples, which differs from the spline
-        by h^2/8 max|M''| (1.05 N mm at most at 33 samples on the coarse arm's tables; the (Theta, s)
-        grid's interpolation, up to 32 N mm, sets the angle error, docs/theory.md 6.4).
+        works on the piecewise-linear interpolant of these samples (its chords differ from the
+        spline by 13.75 N mm at most at 65 samples on the quick arm); ``predict`` closes the balance
+        on the same chords after interpolating the table (:meth:`_balance`, docs/theory.md 6.4).
         """
         external = moments.external
         lo, hi = moments.range_deg
@@ -146,7 +147,7 @@ class MotionActivationModel:
             **(provenance or {})}
         base = -external.value(theta)
         load_base = external.gravity(theta) - external.gravity(theta, 1.0)
-        return cls(theta, s, a.reshape(len(theta), n_moment, 5), base, m_min, m_max, load_base, params)
+        return cls(theta, s, a.reshape(len(theta), n_moment, 5), base, m_min, m_max, load_base, V, params)
 
     @classmethod
     def from_table(cls, table, spec, **options) -> MotionActivationModel:
@@ -205,11 +206,14 @@ class MotionActivationModel:
         i = xp.clip(i, 0, n - 2) if xp is np else i.clamp(0, n - 2)
         return i, u - i
 
-    _ARRAYS = ("alpha", "m_min", "m_max", "base", "load_base")
+    _ARRAYS = ("alpha", "m_min", "m_max", "base", "load_base", "samples")
+    #: bisection steps that close the balance after the table's interpolation (docs/theory.md, 6.4)
+    BALANCE_STEPS = 30
+    BALANCE_PHASES = 3
 
     def _evaluate(self, m, xp, tables):
         """Activations and the signed moment deficit (N mm; 0 where feasible) for checked rows."""
-        alpha, m_min, m_max, base, load_base = tables
+        alpha, m_min, m_max, base, load_base, samples = tables
         R = self._required(m, xp, base, load_base)
         lo, hi = self._interp_theta(m[:, 0], m_min, xp), self._interp_theta(m[:, 0], m_max, xp)
         i, wt = self._cell(m[:, 0], self.theta, xp)
@@ -220,7 +224,50 @@ class MotionActivationModel:
         a = ((flat[i * nS + j] * (1 - ws) + flat[i * nS + j + 1] * ws) * (1 - wt)
              + (flat[(i + 1) * nS + j] * (1 - ws) + flat[(i + 1) * nS + j + 1] * ws) * wt)
         relu = (lambda x: np.maximum(x, 0.0)) if xp is np else xp.relu
-        return a, relu(R - hi) - relu(lo - R)
+        deficit = relu(R - hi) - relu(lo - R)
+        return self._balance(a, R, (i, wt), samples, deficit == 0.0, xp), deficit
+
+    def _balance(self, a, R, cell, samples, feasible, xp):
+        """Close the balance sum_m M_m(a_m) = R (to the samples' chords) after the bilinear
+        interpolation of the activation table, which misses it by up to about 100 N mm where a
+        muscle saturates between grid nodes (0.77 deg at 145 deg on the quick arm): the muscles
+        strictly inside (0, 1) move along their moment slopes, the direction least effort moves
+        them in (its optimality condition 2 a_m = lambda dM_m/da_m), by the step a bisection finds
+        (a Newton step overshoots where a chord's slope changes). Infeasible rows keep the
+        saturated best effort."""
+        i, wt = cell
+        V = samples[i] * (1 - wt[:, :, None]) + samples[i + 1] * wt[:, :, None]  # (b, 5, J) at theta
+        for _ in range(self.BALANCE_PHASES):  # a muscle that saturates in one phase leaves the next's direction
+            moment, slope = self._chords(V, a, xp)
+            free = (a > 1e-9) & (a < 1.0 - 1e-9) & feasible[:, None]
+            d = xp.where(free, slope, 0.0 * slope)
+            scale = xp.abs(d).max(1) if xp is np else xp.abs(d).amax(1)
+            e = d / xp.where(scale > 0, scale, 1.0 + 0.0 * scale)[:, None]  # |t| <= 1: the steepest crosses [0, 1]
+            lo, hi = -1.0 + 0.0 * R, 1.0 + 0.0 * R
+            for _ in range(self.BALANCE_STEPS):
+                t = 0.5 * (lo + hi)
+                short = self._chords(V, xp.clip(a + t[:, None] * e, 0.0, 1.0), xp)[0].sum(1) < R
+                lo, hi = xp.where(short, t, lo), xp.where(short, hi, t)
+            moved = xp.clip(a + (0.5 * (lo + hi))[:, None] * e, 0.0, 1.0)
+            # kept only where it closes the balance further: a moment that is not monotone along the
+            # direction (a chord's slope changing sign) can mislead the bisection
+            better = xp.abs(self._chords(V, moved, xp)[0].sum(1) - R) < xp.abs(moment.sum(1) - R)
+            a = xp.where(better[:, None], moved, a)
+        return a
+
+    @staticmethod
+    def _chords(V, a, xp):
+        """M_m(a_m) and dM_m/da_m on the chords through the uniform samples V (b, 5, J)."""
+        steps = V.shape[2] - 1
+        u = a * steps
+        j = xp.clip(xp.floor(u), 0, steps - 1)
+        if xp is np:
+            j = j.astype(np.int64)
+            v0, v1 = np.take_along_axis(V, j[:, :, None], 2)[..., 0], np.take_along_axis(V, j[:, :, None] + 1, 2)[..., 0]
+        else:
+            j = j.long()
+            v0, v1 = V.gather(2, j[:, :, None])[..., 0], V.gather(2, j[:, :, None] + 1)[..., 0]
+        return v0 + (v1 - v0) * (u - j), (v1 - v0) * steps
 
     def predict(self, motion, with_deficit: bool = False):
         """Activations (n, 5) and feasible (n,) bool; infeasible rows are flagged, not clipped
@@ -310,9 +357,10 @@ class MotionActivationModel:
         if params.pop("kind", None) != "motion-activation-model":
             raise ValueError(f"{folder} does not hold a motion activation model")
         with np.load(folder / "motion_model.npz") as d:
-            if "load_base" not in d.files:
-                raise ValueError(f"{folder}: a motion model of an older version (no load_base): build it again")
-            return cls(d["theta"], d["s"], *(d[k] for k in ("alpha", "base", "m_min", "m_max", "load_base")), params)
+            if "samples" not in d.files:
+                raise ValueError(f"{folder}: a motion model of an older version (no moment samples): build it again")
+            return cls(d["theta"], d["s"], *(d[k] for k in ("alpha", "base", "m_min", "m_max", "load_base", "samples")),
+                       params)
 
 
 class RestAngleModel:
