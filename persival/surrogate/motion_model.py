@@ -39,6 +39,7 @@ _ONNX_NAME = "activation_motion.onnx"
 _ANGLE_ONNX_NAME = "activation_angle.onnx"
 #: activations at which each muscle's moment is sampled for the least-effort solve (docs/theory.md, 6.4)
 ACTIVATION_SAMPLES = 65
+SOLVE_STRIDE = 4  # the least-effort table is solved on samples 0, 4, ..., 64 (17 chords)
 
 
 def _response(V, levels, lam):
@@ -137,7 +138,10 @@ class MotionActivationModel:
         m_min, m_max = V.min(axis=2).sum(axis=1), V.max(axis=2).sum(axis=1)
         s = np.linspace(0.0, 1.0, n_moment)
         R = m_min[:, None] + s[None, :] * (m_max - m_min)[:, None]
-        a, _ = least_effort(np.repeat(V, n_moment, axis=0), levels, R.ravel())
+        # the table is solved on every fourth sample's chords (a quarter of the work): predict
+        # closes the balance on all of them afterwards (_balance), which sets the angle's accuracy
+        coarse = slice(None, None, SOLVE_STRIDE)
+        a, _ = least_effort(np.repeat(V[:, :, coarse], n_moment, axis=0), levels[coarse], R.ravel())
         params = {
             "hand_distance_mm": external.hand_distance_mm, "gravity_m_s2": external.gravity_m_s2,
             "inertia_kg_mm2": float(inertia_kg_mm2 or external.mass_kg

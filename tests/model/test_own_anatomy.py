@@ -236,12 +236,14 @@ def test_a_surface_that_one_feature_angle_cannot_reparametrize_is_remeshed_at_th
     assert volume.mesh.volume() == pytest.approx(repaired.volume, rel=0.01)
 
 
-def test_a_model_file_enters_the_run_digests_only_when_given():
+def test_the_model_file_enters_the_digests_of_the_stages_that_read_it():
+    """Built-in or given, the model file's hash is an input of the stages that read the arm (so an
+    edited file reruns them), and of no other stage's settings (they see it through upstream)."""
     from persival.pipeline import RunConfig, _stage_inputs
 
-    assert "model_hash" not in _stage_inputs("tables", RunConfig(), {})["settings"]  # resumed runs stay valid
     own = RunConfig(model="/data/my_arm.toml", model_hash="abc")
     assert _stage_inputs("campaign", own, {})["settings"]["model_hash"] == "abc"
+    assert _stage_inputs("tables", RunConfig(model_hash="built-in"), {})["settings"]["model_hash"] == "built-in"
     assert "model_hash" not in _stage_inputs("sg", own, {})["settings"]
 
 
