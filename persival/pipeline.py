@@ -16,8 +16,8 @@
    14 report    OUT/report/    index.html + results.json
 
 Resumable stage by stage: every stage leaves ``OUT/<stage>/stage.json`` with the digest of its
-inputs (its own settings, the model file's content hash, the physics and package versions, and
-the digests of the stages it reads); a stage whose digest is unchanged is skipped, so an edited
+inputs (its own settings, the model file's content hash with the physics version, the package
+version, and the digests of the stages it reads); a stage whose digest is unchanged is skipped, so an edited
 model file, a new physics version or another release of the code reruns exactly the stages after
 it. An interrupted campaign stage (killed, or stopped by states that failed)
 is resumed where it stopped by the next run with the same settings. The campaign's simulator is
@@ -95,11 +95,11 @@ def _digest(obj) -> str:
 
 
 def code_versions() -> dict:
-    """What of the code every stage's result depends on: the package release and the physics version."""
+    """What of the code every stage's result depends on beyond its inputs: the package release (the
+    physics version is part of the model hash, which the stages that read the arm hold)."""
     import persival
-    from persival.model.arm_file import PHYSICS_VERSION
 
-    return {"persival": persival.__version__, "physics": PHYSICS_VERSION}
+    return {"persival": persival.__version__}
 
 
 def _stage_inputs(name: str, config: RunConfig, done: dict) -> dict:

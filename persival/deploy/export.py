@@ -44,10 +44,6 @@ def _onnx(module: torch.nn.Module, example, path: Path, input_name, output_names
     export_graph(module, example, path, input_name, output_names, fold=fold, dynamic_axes={LOAD_INPUT: {0: "load_batch"}})
 
 
-def _session(path: Path):
-    return onnx_session(path)
-
-
 def _optional_load_input(path: Path) -> None:
     """Make the graph's ``load_kg`` input optional: an initializer of the same name (0 kg) is its
     default, so a client that feeds ``activations`` only (the deployment contract) still runs it."""
@@ -95,7 +91,7 @@ def _check_tiers(files: dict[str, Path], graph, probe: np.ndarray, names: list[s
     ref = [r.numpy() for r in (ref if isinstance(ref, tuple) else (ref,))]
     out = {}
     for tier, path in files.items():
-        got = _session(path).run(None, {"activations": probe.astype(np.float32)})
+        got = onnx_session(path).run(None, {"activations": probe.astype(np.float32)})
         diffs = {name: float(np.abs(g - r).max()) for name, g, r in zip(names, got, ref)}
         out[tier] = {"file": path.name, "bytes": path.stat().st_size,
                      "max_abs_diff_vs_torch": diffs}
@@ -111,7 +107,7 @@ def _check_load_variant(path: Path, graph, probe: np.ndarray, names: list[str], 
     with torch.no_grad():
         ref = graph(torch.as_tensor(probe, dtype=torch.float32), torch.as_tensor(load))
     ref = [r.numpy() for r in (ref if isinstance(ref, tuple) else (ref,))]
-    got = _session(path).run(None, {"activations": probe.astype(np.float32), LOAD_INPUT: load})
+    got = onnx_session(path).run(None, {"activations": probe.astype(np.float32), LOAD_INPUT: load})
     diffs = {name: float(np.abs(g - r).max()) for name, g, r in zip(names, got, ref)}
     if diffs["positions"] > tolerance_mm:
         raise RuntimeError(f"{path.name} differs from PyTorch at {LOAD_PROBE_KG} kg by {diffs['positions']:.2e} mm "
@@ -149,7 +145,7 @@ def _export_activation_model(model, out: Path) -> dict:
     module = model.torch_module()
     _onnx(module, torch.full((2, 1), 0.5 * sum(model.range_deg)), path, "elbow_angle_deg", ["activations"])
     probe = np.linspace(*model.range_deg, 257)[:, None]
-    got = _session(path).run(None, {"elbow_angle_deg": probe.astype(np.float32)})[0]
+    got = onnx_session(path).run(None, {"elbow_angle_deg": probe.astype(np.float32)})[0]
     diff = float(np.abs(got - model.predict(probe[:, 0])).max())
     if diff > 1e-6:
         raise RuntimeError(f"activation_angle.onnx differs from Python by {diff:.2e} (tolerance 1e-6)")

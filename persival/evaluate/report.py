@@ -156,7 +156,7 @@ def _page(out: Path, tables: dict, figures: list, provenance: dict, configs: dic
 
 def write_report(out: str | Path, command: str | None = None) -> Path:
     """``OUT/report/index.html`` and ``OUT/report/results.json``; returns the HTML's path."""
-    from persival.evaluate.stage import default_command, environment
+    from persival.evaluate.stage import default_command, deployed_summary, environment
 
     out = Path(out)
     folder = out / "evaluate"
@@ -182,6 +182,8 @@ def write_report(out: str | Path, command: str | None = None) -> Path:
                "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"), "summary": summary,
                "provenance": provenance, "configuration": configs, "tables": tables,
                "figures": [c for c, _ in figures], "stages": stages,
-               "deployed": evaluation.get("deployed")}
+               # the export's own record, read now: an export redone after the evaluation (its
+               # activation models, their angle contract) is what the report describes
+               "deployed": deployed_summary(out / "export") or evaluation.get("deployed")}
     (report / "results.json").write_text(json.dumps(results, indent=1, default=float))
     return index

@@ -20,10 +20,22 @@ import numpy as np
 
 from persival.surrogate.inverse import InverseProblem
 
-__all__ = ["AngleActivationModel", "ADMISSIBLE_RANGE_DEG"]
+__all__ = ["AngleActivationModel", "ADMISSIBLE_RANGE_DEG", "check_angles"]
 
 #: docs/theory.md, 6.3: the paper's admissible elbow angles (deg), cut to the reachable range if smaller
 ADMISSIBLE_RANGE_DEG = (10.0, 150.0)
+
+
+def check_angles(theta_deg, range_deg) -> np.ndarray:
+    """Elbow angles (n,) float64, finite and inside ``range_deg`` (an angle model's), or ValueError."""
+    theta = np.atleast_1d(np.asarray(theta_deg, dtype=np.float64)).reshape(-1)
+    if not np.isfinite(theta).all():
+        raise ValueError("elbow angles must be finite")
+    lo, hi = range_deg
+    outside = (theta < lo - 1e-9) | (theta > hi + 1e-9)
+    if outside.any():
+        raise ValueError(f"elbow angle {theta[outside][0]:.3f} deg is outside the model's range {lo:.2f} to {hi:.2f} deg")
+    return theta
 
 
 class AngleActivationModel:
@@ -121,14 +133,7 @@ class AngleActivationModel:
 
     # ------------------------------------------------------------------ evaluation
     def predict(self, theta_deg) -> np.ndarray:
-        theta = np.atleast_1d(np.asarray(theta_deg, dtype=np.float64)).reshape(-1)
-        if not np.isfinite(theta).all():
-            raise ValueError("elbow angles must be finite")
-        lo, hi = self.range_deg
-        outside = (theta < lo - 1e-9) | (theta > hi + 1e-9)
-        if outside.any():
-            raise ValueError(f"elbow angle {theta[outside][0]:.3f} deg is outside the model's range "
-                             f"{lo:.2f} to {hi:.2f} deg")
+        theta = check_angles(theta_deg, self.range_deg)
         return np.column_stack([np.interp(theta, self.knots, self.values[:, m]) for m in range(5)])
 
     def torch_module(self):

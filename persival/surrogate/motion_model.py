@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from persival.onnx_io import export_graph, onnx_session
+from persival.surrogate.activation_model import check_angles
 from persival.vocabulary import MUSCLES
 
 __all__ = ["MotionActivationModel", "least_effort", "plot_motion_model", "WINTER_GYRATION_RATIO"]
@@ -212,7 +213,7 @@ class MotionActivationModel:
 
     _ARRAYS = ("alpha", "m_min", "m_max", "base", "load_base", "samples")
     #: bisection steps that close the balance after the table's interpolation (docs/theory.md, 6.4)
-    BALANCE_STEPS = 30
+    BALANCE_STEPS = 16  # t to 3e-5 of a full range: the angles of 30 steps, half the graph (docs/theory.md 6.4)
     BALANCE_PHASES = 3
 
     def _evaluate(self, m, xp, tables):
@@ -385,13 +386,7 @@ class RestAngleModel:
         self.branch_notes: list = []
 
     def _rows(self, theta_deg) -> np.ndarray:
-        theta = np.atleast_1d(np.asarray(theta_deg, dtype=np.float64)).reshape(-1)
-        if not np.isfinite(theta).all():
-            raise ValueError("elbow angles must be finite")
-        lo, hi = self.range_deg
-        outside = (theta < lo - 1e-9) | (theta > hi + 1e-9)
-        if outside.any():
-            raise ValueError(f"elbow angle {theta[outside][0]:.3f} deg is outside the model's range {lo:.2f} to {hi:.2f} deg")
+        theta = check_angles(theta_deg, self.range_deg)
         return np.column_stack([theta, np.zeros((len(theta), 3))])
 
     def predict(self, theta_deg) -> np.ndarray:
