@@ -119,7 +119,7 @@ def run(out: str | Path, config: RunConfig | None = None, console=None) -> dict:
     if config.model_hash is None:  # the model file's content is an input of every stage that reads it
         from dataclasses import replace
 
-        from persival.model.arm_file import load_model_file
+        from persival.model.arm.model_file import load_model_file
 
         config = replace(config, model_hash=load_model_file(config.model)[1])
     console = console or Console()

@@ -82,14 +82,14 @@ def motion(out: Path, config, console) -> dict:
     from persival.surrogate.motion_model import MotionActivationModel, plot_motion_model
 
     if (out / "structured" / "surrogate.json").is_file():
-        from persival.surrogate.base import load_surrogate
+        from persival.surrogate.open import load_surrogate
 
         deployed = load_surrogate(out / "structured")
         provenance = {"model_hash": deployed.metadata.get("model_hash"), "profile": deployed.profile}
         model = MotionActivationModel.build(deployed.moments, provenance=provenance)
         source = str(out / "structured")
     elif config.moment_table is not None:
-        from persival.model.arm_file import load_model_file
+        from persival.model.arm.model_file import load_model_file
         from persival.tables.moment_table import MomentTable
 
         spec, model_hash = load_model_file(config.model)
@@ -157,8 +157,8 @@ def export(out: Path, config, console) -> dict:
     sparse-grid angle model."""
     from persival.deploy.export import export_model
     from persival.surrogate.activation_model import AngleActivationModel
-    from persival.surrogate.base import load_surrogate
     from persival.surrogate.dataset import Dataset
+    from persival.surrogate.open import load_surrogate
 
     network = load_surrogate(out / "networks" / "pod")
     sg_angle = AngleActivationModel.load(out / "inverse" / "activation_model.json")

@@ -23,8 +23,8 @@ def model(out: Path, config, console) -> dict:
     import meshio
 
     from persival.campaign.arm_simulator import muscle_surface
-    from persival.model.arm import ArmModel
-    from persival.model.output import bone_surfaces, muscle_submesh
+    from persival.model.arm.arm_model import ArmModel
+    from persival.model.arm.output import bone_surfaces, muscle_submesh
 
     folder = out / "model"
     with console.status(f"meshing the arm of {config.model or 'the built-in model'} ({config.profile} profile)"):
@@ -88,9 +88,9 @@ def fe(out: Path, config, console) -> dict:
     else each continued from the hanging arm (from biceps 0.5 the jump to all flexors at 1 is a
     snap-through of the slack brachioradialis: docs/arm_model.md)."""
     from persival.evaluate.render import render_states
-    from persival.model.arm import ArmModel
-    from persival.model.output import write_state
-    from persival.model.progress import ConsoleProgress
+    from persival.model.arm.arm_model import ArmModel
+    from persival.model.arm.output import write_state
+    from persival.model.arm.progress import ConsoleProgress
 
     arm = ArmModel(config.model, profile=config.profile)
     solver = None

@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 
 def pytest_configure(config):
-    """The on-disk state cache (persival.model.state_cache) of a test run is a fresh folder of
+    """The on-disk state cache (persival.model.arm.state_cache) of a test run is a fresh folder of
     that run, shared by its xdist workers (they inherit the variable; entries are keyed by model
     and mesh and written atomically), never the user's ~/.cache. It starts with the coarse arm's
     rest states and hanging arm (tests/data/state_cache, tests/data/README.md): every module that
@@ -87,7 +87,7 @@ def small_run(tmp_path_factory) -> Path:
 def add_motion_model(export: Path, table: Path = Path(__file__).parent / "data" / "moments_coarse.npz") -> Path:
     """Give an export folder the motion-and-load model of a moment table (the coarse FE arm's by
     default), as `persival run` does: activation_motion.onnx and its metadata entry."""
-    from persival.model.arm_file import load_model_file
+    from persival.model.arm.model_file import load_model_file
     from persival.surrogate.motion_model import MotionActivationModel
     from persival.tables.moment_table import MomentTable
 
@@ -118,7 +118,7 @@ COARSE_TABLE = Path(__file__).parent / "data" / "response_table_coarse"
 @pytest.fixture(scope="module")
 def coarse_arm():
     """The built-in arm on the coarse mesh (meshed once per module)."""
-    from persival.model.arm import ArmModel
+    from persival.model.arm.arm_model import ArmModel
 
     return ArmModel(profile="coarse")
 
@@ -132,7 +132,7 @@ REBUILD_TABLES = ("persival tables --profile coarse --angles 0:160:20 --levels 0
 def coarse_table(coarse_arm):
     """The coarse response-table fixture (tests/data/README.md); a failure naming the command that
     rebuilds it when the model or mesh changed since it was built (a skip would hide the tests it feeds)."""
-    from persival.model.state_cache import mesh_fingerprint
+    from persival.model.arm.state_cache import mesh_fingerprint
     from persival.tables.moment_table import TableMismatchError
     from persival.tables.response_table import ResponseTable
 

@@ -1,5 +1,5 @@
 """The contact terms' check: the tangent against central differences of the force, the force
-against central differences of the energy (persival.model.contact, persival.model.walls)."""
+against central differences of the energy (persival.model.fe.contact, persival.model.anatomy.walls)."""
 
 from __future__ import annotations
 

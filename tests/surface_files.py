@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.model.defaults import default_model_path
+from persival.model.arm.defaults import default_model_path
 
 SPINDLE_LENGTH = 330.0  # mm between the two cap centres, along +z from the origin
 

@@ -1,4 +1,5 @@
-"""Imports flow one way (SPEC 2): model -> tables -> campaign -> surrogate -> deploy -> evaluate.
+"""Imports flow one way (SPEC 2): model -> tables -> campaign -> surrogate -> deploy -> evaluate,
+and inside the model the FE core, the anatomy and the arm: fe -> anatomy -> arm.
 
 Reads every module's imports with ast (function-level imports included, and "module:attr"
 strings that a registry imports by name) and fails on one that reaches a later stage. The
@@ -13,8 +14,8 @@ import re
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "persival"
-STAGES = ("model", "tables", "campaign", "surrogate", "deploy", "evaluate")
-TOP = {"persival.pipeline", "persival.stages", "persival.stages_arm", "persival.cli", "persival.run_command"}
+STAGES = ("model.fe", "model.anatomy", "model.arm", "tables", "campaign", "surrogate", "deploy", "evaluate")
+TOP = {"persival.pipeline", "persival.stages", "persival.stages_arm"}  # the command line (persival.cli.*) too
 BOTTOM, ABOVE_ALL = -1, len(STAGES)
 # a lazily imported factory, e.g. "persival.campaign.analytic:AnalyticSimulator"
 LAZY_TARGET = re.compile(r"^(persival(?:\.\w+)+):\w+$")
@@ -27,11 +28,12 @@ def module_name(path: Path) -> str:
 
 def rank(module: str) -> int:
     """Position in the pipeline: BOTTOM for top-level helpers, ABOVE_ALL for the sequencers."""
-    if module in TOP:
+    if module in TOP or module == "persival.cli" or module.startswith("persival.cli."):
         return ABOVE_ALL
     parts = module.split(".")
-    if len(parts) >= 2 and parts[1] in STAGES:
-        return STAGES.index(parts[1])
+    for depth in (3, 2):  # a model layer (persival.model.fe) before a stage (persival.tables)
+        if len(parts) >= depth and ".".join(parts[1:depth]) in STAGES:
+            return STAGES.index(".".join(parts[1:depth]))
     return BOTTOM
 
 
@@ -49,7 +51,7 @@ def imported_modules(path: Path, module: str) -> list[tuple[int, str]]:
                 target = ".".join(base + ([node.module] if node.module else []))
             else:
                 target = node.module or ""
-            # `from persival.model import arm` imports the module persival.model.arm
+            # `from persival.model.fe import tet10` imports the module persival.model.fe.tet10
             found += [(node.lineno, target)] + [(node.lineno, f"{target}.{a.name}") for a in node.names]
         elif isinstance(node, ast.Constant) and isinstance(node.value, str):
             match = LAZY_TARGET.match(node.value)
@@ -70,8 +72,6 @@ def violations() -> tuple[list[str], int]:
             where = f"{path.relative_to(PACKAGE.parent)}:{line}"
             if rank(target) > rank(module):
                 problems.append(f"{where}: {module} (stage {rank(module)}) imports later {target} (stage {rank(target)})")
-            if module.endswith(".commands") and target.endswith(".commands") and target.split(".")[1] != module.split(".")[1]:
-                problems.append(f"{where}: {module} imports another stage's commands, {target}")
     return problems, n_imports
 
 
@@ -82,14 +82,57 @@ def test_imports_only_look_upstream():
 
 
 def test_the_checker_sees_a_backward_import(tmp_path):
-    # The checker itself: a later-stage import, a relative one, a lazy name and a commands import.
+    # The checker itself: a later-stage import, a relative one, a lazy name and a command-line import.
     source = ("from persival.surrogate.sparse_grid import SparseGrid\n"
               "def f():\n    from ..evaluate import metrics\n"
               "LAZY = {'x': 'persival.deploy.server:app'}\n"
-              "from persival.model import commands\n")
+              "from persival.cli import model\n")
     path = tmp_path / "fake.py"
     path.write_text(source)
-    found = {name for _, name in imported_modules(path, "persival.campaign.commands")}
+    found = {name for _, name in imported_modules(path, "persival.campaign.runner")}
     assert {"persival.surrogate.sparse_grid", "persival.evaluate.metrics", "persival.deploy.server",
-            "persival.model.commands"} <= found
-    assert rank("persival.vocabulary") < rank("persival.model.arm") < rank("persival.evaluate.render") < rank("persival.cli")
+            "persival.cli.model"} <= found
+    assert rank("persival.vocabulary") < rank("persival.model.fe.solver") < rank("persival.model.anatomy.walls")
+    assert rank("persival.model.anatomy.walls") < rank("persival.model.arm.body") < rank("persival.tables.open")
+    assert rank("persival.tables.open") < rank("persival.evaluate.render") < rank("persival.cli")
+
+
+def _runtime_imports(path: Path, module: str) -> set[str]:
+    """The persival modules ``path`` imports by statement (not a registry's lazy name, not under
+    ``if TYPE_CHECKING:``, not its own parent package, which Python imports first anyway)."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    typing_only = {id(n) for node in ast.walk(tree) if isinstance(node, ast.If)
+                   and getattr(node.test, "id", None) == "TYPE_CHECKING" for n in ast.walk(node)}
+    names = {m for _, m in imported_modules(path, module)}
+    typed = {m for node in ast.walk(tree) if id(node) in typing_only and isinstance(node, ast.ImportFrom)
+             for m in [node.module or ""] + [f"{node.module}.{a.name}" for a in node.names]}
+    lazy = {match.group(1) for node in ast.walk(tree) if isinstance(node, ast.Constant) and isinstance(node.value, str)
+            for match in [LAZY_TARGET.match(node.value)] if match}
+    return {m for m in names - typed - lazy if not module.startswith(m + ".")}
+
+
+def test_no_import_circles():
+    """No module reaches itself through its imports (a type-only import aside): each idea can be
+    read, tested and replaced on its own."""
+    known = dict(modules())
+    graph = {m: {t for t in _runtime_imports(p, m) if t in known.values() and t != m} for p, m in known.items()}
+    circles = []
+    for start in graph:  # depth-first search for a path back to start
+        stack, seen = [(start, [start])], set()
+        while stack:
+            node, path = stack.pop()
+            for nxt in graph.get(node, ()):
+                if nxt == start:
+                    circles.append(" -> ".join(path + [start]))
+                elif nxt not in seen:
+                    seen.add(nxt)
+                    stack.append((nxt, path + [nxt]))
+    assert not circles, "import circles:\n" + "\n".join(sorted(set(circles)))
+
+
+def test_only_the_command_line_imports_typer():
+    """The library is used from Python as well: typer (the command line's parser) stays in persival.cli."""
+    offenders = [f"{path.relative_to(PACKAGE.parent)}" for path, module in modules()
+                 if not (module == "persival.cli" or module.startswith("persival.cli."))
+                 and re.search(r"^\s*(import typer|from typer)", path.read_text(), re.M)]
+    assert not offenders, "typer imported outside persival.cli: " + ", ".join(offenders)

@@ -214,7 +214,7 @@ def workdir(tmp_path_factory):
     (root / "afile").write_text("not a folder\n")
     (root / "folder").mkdir()
     (root / "foreign.toml").write_text('name = "a table that is no arm"\n[bones]\nradius = 3\n')
-    from persival.model.defaults import default_model_path
+    from persival.model.arm.defaults import default_model_path
 
     atlas = (default_model_path().parent / "variants" / "atlas_arm.toml").read_text()
     (root / "overlap.toml").write_text(atlas.replace("{ z = 81.7, centre = [-2.0, 21.0]", "{ z = 81.7, centre = [-2.0, 32.0]"))
@@ -288,7 +288,7 @@ def test_bad_inputs_are_one_line_errors_and_leave_nothing(workdir, monkeypatch, 
 
 
 def test_internal_errors_are_one_line_unless_debug():
-    from persival.cli_errors import ErrorReportingGroup
+    from persival.cli.errors import ErrorReportingGroup
 
     demo = typer.Typer(cls=ErrorReportingGroup)
 
@@ -310,8 +310,8 @@ def test_internal_errors_are_one_line_unless_debug():
 def test_a_hanging_arm_that_does_not_converge_is_a_clean_error(tmp_path, monkeypatch):
     """A model whose hanging arm has no FE equilibrium within the retries (e.g. a variant meant for
     flexed poses) ends `persival simulate` with one error line and exit 3, nothing written."""
-    import persival.model.arm as arm_module
-    from persival.model.solver import ConvergenceError
+    import persival.model.arm.arm_model as arm_module
+    from persival.model.fe.solver import ConvergenceError
 
     class StallingArm:
         def __init__(self, *args, **kwargs):

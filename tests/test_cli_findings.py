@@ -22,7 +22,7 @@ def test_accuracy_of_an_all_muscle_sg(tmp_path):
     from persival.campaign.design import Design
     from persival.campaign.runner import INLINE, run_campaign
     from persival.campaign.simulator import SimulatorSpec
-    from persival.evaluate import commands
+    from persival.cli import evaluate as commands
     from persival.surrogate.stage import fit_sparse_grid
 
     spec = SimulatorSpec("analytic", {"mesh_size": 20.0})
@@ -100,3 +100,26 @@ def test_training_logs_count_epochs_per_fold(tmp_path):
     report = _train_progress(console, "pod net")
     report(6, 6, 0.01, [0.1, 0.2, 0.3], "fold 2/2 epoch 3/3")
     assert "pod net: fold 2/2 epoch 3/3, val. loss 0.01" in console.export_text()
+
+
+def test_model_list_shows_whole_file_names_at_80_columns():
+    from persival.cli.app import app
+    from persival.model.arm.defaults import packaged_models
+
+    res = CliRunner().invoke(app, ["model", "list"], env={"COLUMNS": "80"}, terminal_width=80)
+    assert res.exit_code == 0, res.output
+    assert max(len(line) for line in res.output.splitlines()) <= 80
+    files = "".join(line.split("│")[3].strip() for line in res.output.splitlines() if line.count("│") == 4)
+    folder = packaged_models()["default"].parent
+    for path in packaged_models().values():
+        assert str(path.relative_to(folder)) in files  # folded over lines, never cut
+    assert f"files in {folder}" in res.output
+
+
+def test_a_bad_option_value_is_one_line():
+    from persival.cli.app import app
+
+    res = CliRunner().invoke(app, ["motion", "play", "--load", "-1", "x.csv"], prog_name="persival")
+    assert res.exit_code == 2
+    lines = [line for line in res.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: persival motion play: Invalid value for '--load'"), res.output

@@ -124,8 +124,8 @@ def test_an_edited_model_file_or_a_new_physics_version_reruns_every_stage_from_t
     from rich.console import Console
 
     import persival
-    import persival.model.arm_file as arm_file
-    import persival.model.defaults as defaults
+    import persival.model.arm.defaults as defaults
+    import persival.model.arm.model_file as arm_file
     from persival import stages
 
     model = tmp_path / "default_arm.toml"

@@ -1,11 +1,11 @@
-"""The progress of FE solves as the CLI shows it (persival.model.progress), without solving."""
+"""The progress of FE solves as the CLI shows it (persival.model.arm.progress), without solving."""
 
 import io
 import time
 
 from rich.console import Console
 
-from persival.model.progress import ConsoleProgress, SolveTracker
+from persival.model.arm.progress import ConsoleProgress, SolveTracker
 
 
 def test_tracker_without_callback_is_silent():
@@ -56,3 +56,14 @@ def test_progress_bar_prints_lines_to_a_log_file_with_a_heartbeat():
     assert sum(line.startswith("  campaign: 1/4") for line in lines) >= 2  # heartbeat lines while stuck at 1
     terminal = Console(file=io.StringIO(), force_terminal=True)
     assert not isinstance(progress_bar(console=terminal), LineProgress)
+
+
+def test_a_solve_still_setting_up_says_so_not_starting_then():
+    """Before the first report (meshing, caches) a log shows the label and the time so far."""
+    out = io.StringIO()
+    console = Console(file=out, force_terminal=False, width=200)
+    with ConsoleProgress(console, None, "FE: hanging", every_s=0.4):
+        time.sleep(1.6)
+    lines = out.getvalue().splitlines()
+    assert lines and all(line.startswith("  FE: hanging: setting up, ") and line.endswith(" s so far") for line in lines)
+    assert "starting" not in out.getvalue()

@@ -23,9 +23,9 @@ if "PERSIVAL_CACHE" not in os.environ:
     os.environ["PERSIVAL_CACHE"] = str(out / "cache")
     shutil.copytree(REPO / "tests" / "data" / "state_cache", out / "cache", dirs_exist_ok=True)
 
-from persival.model.arm import ArmModel  # noqa: E402  (after the cache is chosen)
-from persival.model.output import write_state  # noqa: E402
-from persival.model.state_cache import mesh_fingerprint  # noqa: E402
+from persival.model.arm.arm_model import ArmModel  # noqa: E402  (after the cache is chosen)
+from persival.model.arm.output import write_state  # noqa: E402
+from persival.model.arm.state_cache import mesh_fingerprint  # noqa: E402
 from persival.tables.response_table import ResponseTable  # noqa: E402
 from persival.tables.table_solve import TableSolver  # noqa: E402
 

@@ -12,9 +12,9 @@ from dataclasses import replace
 import numpy as np
 
 from persival.campaign.simulator import ReferenceGeometry, SimulationResult, SimulatorSpec, SurfaceTopology
-from persival.model.arm import ArmModel, ArmState
-from persival.model.mesh import Tet10Mesh
-from persival.model.output import muscle_submesh
+from persival.model.arm.arm_model import ArmModel, ArmState
+from persival.model.arm.output import muscle_submesh
+from persival.model.fe.mesh import Tet10Mesh
 from persival.tables.open import ensure_tables, open_tables
 from persival.vocabulary import MUSCLES
 

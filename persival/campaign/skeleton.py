@@ -2,7 +2,7 @@
 
 A campaign store keeps muscle surfaces only; a viewer also wants the humerus fixed and the
 forearm bones turning about the elbow hinge. This module describes them per simulator kind:
-the FE arm's from its model file (the bones with their shapes, persival.model.bone_shapes, the
+the FE arm's from its model file (the bones with their shapes, persival.model.anatomy.bone_shapes, the
 same surfaces the FE states are written and drawn with), the analytic stand-in's from its fixed
 geometry (capped tubes), none for an external code. Bones are given at elbow angle 0; a forearm
 point p sits at angle theta at ``centre + R(axis, theta)(p - centre)`` (right-handed).
@@ -21,14 +21,14 @@ def _bone(name: str, segment: str, points: np.ndarray, triangles: np.ndarray) ->
 
 
 def _tube(name: str, segment: str, start, end, radius: float) -> dict:
-    from persival.model.bone_shapes import tube_surface
+    from persival.model.anatomy.bone_shapes import tube_surface
 
     return _bone(name, segment, *tube_surface(np.asarray(start, float), np.asarray(end, float), radius))
 
 
 def _arm_skeleton(model_file: str | None) -> dict:
-    from persival.model.arm_file import load_model_file
-    from persival.model.bone_shapes import bone_shapes
+    from persival.model.anatomy.bone_shapes import bone_shapes
+    from persival.model.arm.model_file import load_model_file
 
     spec, _ = load_model_file(model_file)
     shapes = bone_shapes(spec)  # forearm bones at theta = 0, as the skeleton's format wants them

@@ -45,9 +45,9 @@ def _comparisons(run: LoadedRun) -> list[tuple[str, str]]:
 
 def in_training_table(run: LoadedRun, chunk: int = 512, data=None) -> dict:
     """Each network against its own training states (the SG training data it was fitted to)."""
-    from persival.surrogate.dataset import Dataset
+    from persival.surrogate.training_data import open_dataset
 
-    data = data if data is not None else Dataset.load(run.layout.data)
+    data = data if data is not None else open_dataset(run.layout.data)
     rows, notes = [], []
     for label, scope in _comparisons(run):
         net = run.networks[label]

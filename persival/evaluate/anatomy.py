@@ -3,7 +3,7 @@
 Reads the FE stage's state directories (one VTU per muscle and bone at its deformed position)
 or a campaign store of the FE arm (muscle surfaces per state; the bones are placed from the
 model file at each state's elbow angle), turns every body into a closed triangle surface and
-measures it with :mod:`persival.model.anatomy_check`. The muscles' ends (origin and the end of
+measures it with :mod:`persival.model.anatomy.overlap`. The muscles' ends (origin and the end of
 the FE body at the state's angle) come from the model file, which must be the one the states
 were computed with.
 """
@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from persival.campaign.arm_simulator import display_triangles
-from persival.model.anatomy_check import Body, bed_gaps, overlaps
-from persival.model.arm_body import ArmKinematics
-from persival.model.mesh import Tet10Mesh
-from persival.model.output import bone_surfaces
+from persival.model.anatomy.overlap import Body, bed_gaps, overlaps
+from persival.model.arm.kinematics import ArmKinematics
+from persival.model.arm.output import bone_surfaces
+from persival.model.fe.mesh import Tet10Mesh
 from persival.vocabulary import MUSCLES
 
 __all__ = ["check_outlines_table", "check_state_dirs", "check_store", "pair_limit_mm", "print_tables", "worst_cases",
@@ -203,11 +203,11 @@ def print_tables(console, results: list[dict], per_state_columns: int = 5) -> No
 
 
 def check_outlines_table(console, model_file=None, out: Path | None = None) -> list[dict]:
-    """The model file's muscle outlines across the humerus (persival.model.cross_sections): a table
+    """The model file's muscle outlines across the humerus (persival.model.arm.cross_sections): a table
     of the overlaps per level, and the JSON file."""
     from rich.table import Table
 
-    from persival.model.cross_sections import LEVELS, outline_overlaps, where
+    from persival.model.arm.cross_sections import LEVELS, outline_overlaps, where
 
     kinematics = ArmKinematics(model_file, check_outlines=False)  # here they are reported, not refused
     rows = outline_overlaps(kinematics)

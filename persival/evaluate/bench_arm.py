@@ -32,8 +32,8 @@ def run_arm_benchmark(profile: str = "quick", states: int = 10, direct: int = 0,
     from persival.campaign.design import Design
     from persival.campaign.runner import run_campaign
     from persival.campaign.simulator import SimulatorSpec
-    from persival.model.arm import ArmModel
-    from persival.model.solver import ConvergenceError
+    from persival.model.arm.arm_model import ArmModel
+    from persival.model.fe.solver import ConvergenceError
     from persival.tables.open import ensure_tables
     from persival.tables.table_solve import OutsideTableError, TableSolver
 

@@ -46,10 +46,10 @@ def _best_of(fn, repeats: int) -> float:
 
 
 def run_fe_benchmark(mesh_size: float = 6.3, activation: float = 1.0, repeats: int = 5, backend: str = "auto") -> FEBenchmark:
-    from persival.model.constraints import Dirichlet
-    from persival.model.geometry import spindle, spindle_material
-    from persival.model.linear_solver import SparseSymmetricSolver
-    from persival.model.solver import QuasiStaticSolver, SolverOptions
+    from persival.model.fe.constraints import Dirichlet
+    from persival.model.fe.geometry import spindle, spindle_material
+    from persival.model.fe.linear_solver import SparseSymmetricSolver
+    from persival.model.fe.solver import QuasiStaticSolver, SolverOptions
 
     mesh = spindle(length=300.0, belly_radius=20.0, tendon_radius=5.0, mesh_size=mesh_size)
     solver = QuasiStaticSolver(

@@ -1,6 +1,6 @@
 """Calibration curves of the arm: every muscle's moment about the elbow against the angle.
 
-Each muscle is solved on its own (module persival.model.muscle_unit) at the origin-insertion
+Each muscle is solved on its own (module persival.model.arm.muscle_unit) at the origin-insertion
 length of each angle, passive (activation 0) and fully active (1), by continuation along the
 angle. Its moment is ``-T dL/dtheta``. Summed with gravity and the passive joint these curves
 predict the equilibria: the hanging arm (all passive) and the reach of any muscle set at full
@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from persival.figures import save_figure
-from persival.model.arm import ArmModel
-from persival.model.solver import ConvergenceError
+from persival.model.arm.arm_model import ArmModel
+from persival.model.fe.solver import ConvergenceError
 from persival.tables.moment_table import sweep_muscle
 from persival.vocabulary import MUSCLES
 

@@ -105,7 +105,7 @@ class LoadedRun:
 
 def load_run(out: str | Path) -> LoadedRun:
     from persival.surrogate.activation_model import AngleActivationModel
-    from persival.surrogate.base import load_surrogate
+    from persival.surrogate.open import load_surrogate
 
     layout = RunLayout(Path(out))
     layout.check()

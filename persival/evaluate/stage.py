@@ -161,14 +161,14 @@ def _accuracy_tables(run, steps, command, max_draws, n_states, tables, skipped) 
 def _prototypes_and_hotspots(run, steps, command, tables, skipped, figures, prototype_samples) -> None:
     from persival.evaluate.evaluate_figures import biceps_surface, hotspot_errors, plot_hotspots
     from persival.evaluate.prototypes import SHAPES, prototype_table
-    from persival.surrogate.dataset import Dataset
+    from persival.surrogate.training_data import open_dataset
 
     layout, short = run.layout, None
     if layout.data.exists() and "biceps" in run.sg.surfaces.names:
         t0 = time.perf_counter()
         paper = run.networks.get("paper")
         n_mid = paper.net.config.get("n_mid") if paper is not None else None
-        data = Dataset.load(layout.data).select("biceps")
+        data = open_dataset(layout.data).select("biceps")
         table, short = prototype_table(data, n_mid, paper.config.activation if paper is not None else "silu",
                                        samples=prototype_samples, progress=steps.task("prototypes", len(SHAPES)))
         tables["prototypes"] = _save(table, layout.evaluate, command, {"data": str(layout.data)}, t0)

@@ -5,7 +5,7 @@ scikit-learn's convention: ``fit(dataset)`` returns the fitted surrogate, ``pred
 answers surface positions ``(n, N, 3)`` in mm for activations ``(n, 5)``, ``predict_angle`` the
 elbow angle where the surrogate has it (``has_angle``), ``predict_with_angle`` both at once,
 ``save(dir)`` / ``load(dir)`` a folder whose ``surrogate.json`` names the kind and the format
-version, so :func:`load_surrogate` opens any of them and the evaluation code never asks which one
+version, so :func:`persival.surrogate.open.load_surrogate` opens any of them and the evaluation code never asks which one
 it measures. Every surrogate inherits :class:`Surrogate`; tests/surrogate/test_surrogate_conformance.py
 runs the same checks over every kind.
 """
@@ -22,7 +22,7 @@ import numpy as np
 from persival.file_header import check_header
 from persival.surrogate.dataset import Dataset, Surfaces
 
-__all__ = ["Surrogate", "NotFittedError", "load_surrogate", "KINDS", "MANIFEST"]
+__all__ = ["Surrogate", "NotFittedError", "MANIFEST", "manifest_of"]
 
 MANIFEST = "surrogate.json"
 
@@ -84,7 +84,7 @@ class Surrogate(ABC):
     def read_manifest(cls, path: str | Path) -> dict:
         """The folder's ``surrogate.json``, checked: it exists, names this kind and a version this
         PerSival reads (folders written before versions were recorded count as version 1)."""
-        manifest = _manifest(Path(path))
+        manifest = manifest_of(Path(path))
         if manifest.get("kind", "sparse-grid") != cls.kind:
             raise ValueError(f"{path} holds a {manifest.get('kind')!r} surrogate, not a {cls.kind!r} one")
         return check_header({"format_version": 1, **manifest}, path, f"{cls.kind} surrogate", None, cls.format_version,
@@ -95,7 +95,8 @@ def _json_default(value):
     return value.item() if isinstance(value, np.generic) else str(value)
 
 
-def _manifest(path: Path) -> dict:
+def manifest_of(path: Path) -> dict:
+    """A surrogate folder's surrogate.json, with a clear error where there is none."""
     manifest = path / MANIFEST
     if not manifest.is_file():
         raise FileNotFoundError(f"{path} is not a surrogate folder (no {MANIFEST})")
@@ -103,25 +104,3 @@ def _manifest(path: Path) -> dict:
         return json.loads(manifest.read_text())
     except json.JSONDecodeError as exc:
         raise ValueError(f"{manifest} is not valid JSON: {exc}") from None
-
-
-def _kinds() -> dict:
-    from persival.surrogate.network_surrogate import NetworkSurrogate
-    from persival.surrogate.sparse_grid_surrogate import SparseGridSurrogate
-    from persival.surrogate.structured.surrogate import StructuredSurrogate
-    from persival.surrogate.table_surrogate import ResponseTableSurrogate
-
-    return {cls.kind: cls for cls in (SparseGridSurrogate, NetworkSurrogate, ResponseTableSurrogate, StructuredSurrogate)}
-
-
-KINDS = ("sparse-grid", "network", "response-table", "structured")
-
-
-def load_surrogate(path: str | Path) -> Surrogate:
-    """Open any saved surrogate folder (its ``surrogate.json`` names the kind)."""
-    path = Path(path)
-    kind = _manifest(path).get("kind", "sparse-grid")
-    kinds = _kinds()
-    if kind not in kinds:
-        raise ValueError(f"{path}: unknown surrogate kind {kind!r} (known: {', '.join(kinds)})")
-    return kinds[kind].load(path)

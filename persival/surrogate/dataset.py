@@ -200,12 +200,10 @@ class Dataset:
 
     @classmethod
     def load(cls, path: str | Path) -> Dataset:
-        """A folder written by :meth:`save` or by the training-data generator."""
+        """A folder written by :meth:`save` (training data: :func:`persival.surrogate.training_data.open_dataset`)."""
         path = Path(path)
         if (path / "training_data.json").exists():
-            from persival.surrogate.training_data import load_training_data
-
-            return load_training_data(path)
+            raise ValueError(f"{path} holds training data: open it with persival.surrogate.training_data.open_dataset")
         if not (path / "states.npz").exists():
             raise FileNotFoundError(f"{path} is not a dataset folder (no states.npz or training_data.json)")
         with np.load(path / "states.npz", allow_pickle=False) as z:

@@ -3,7 +3,7 @@
 ``(Theta, dTheta/dt, d2Theta/dt2, load) -> alpha`` on the deployed model's own moment balance
 (:class:`~persival.surrogate.structured.moment_model.MomentModel`: the per-muscle FE moment tables
 interpolated as the deployed graph interpolates them, and one
-:class:`~persival.model.external_moments.ExternalMoments`), so that the activations it gives hold
+:class:`~persival.model.arm.external_moments.ExternalMoments`), so that the activations it gives hold
 the drawn arm at the angle asked for (SPEC 5). The hinge's equation of motion about the elbow
 (flexion positive, docs/theory.md, 3.1) is ``I(load) Theta'' = sum_m M_m(Theta, a_m) + M_g(Theta) +
 M_load(Theta) + M_p(Theta)``, so the muscles must supply the required moment

@@ -12,10 +12,11 @@ from __future__ import annotations
 from pathlib import Path
 
 from persival.surrogate.activation_model import AngleActivationModel
-from persival.surrogate.base import load_surrogate
 from persival.surrogate.dataset import Dataset
 from persival.surrogate.inverse import InverseProblem, InverseSolution
+from persival.surrogate.open import load_surrogate
 from persival.surrogate.sparse_grid_surrogate import SparseGridSurrogate
+from persival.surrogate.training_data import open_dataset
 
 __all__ = ["parse_muscles", "fit_sparse_grid", "solve_inverse", "build_activation_model", "make_training_data",
            "train_network", "load_angle_surrogate", "fit_structured"]
@@ -91,7 +92,7 @@ def train_network(data: str | Path, out: str | Path, config, muscles=None, progr
     from persival.surrogate.network_surrogate import NetworkSurrogate
     from persival.surrogate.plots import plot_training_history
 
-    dataset = Dataset.load(data)
+    dataset = open_dataset(data)
     if muscles is not None:
         dataset = dataset.select(muscles)
     surrogate = NetworkSurrogate(config).fit(dataset, out, progress, device)

@@ -8,7 +8,7 @@ Its cost is in the tables (built once per model by ``persival tables``), not in 
 
 ``fit(dataset)`` picks the surfaces the dataset has and checks that its states come from the
 same model (hash); there is nothing to train. Like every surrogate it answers ``predict`` and
-``predict_angle`` and saves to a folder that :func:`~persival.surrogate.base.load_surrogate` opens.
+``predict_angle`` and saves to a folder that :func:`~persival.surrogate.open.load_surrogate` opens.
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ class ResponseTableSurrogate(Surrogate):
     def solver(self):
         """The table solver (opened on first use: it meshes or reads the cached mesh)."""
         if self._solver is None:
-            from persival.model.arm import ArmModel
+            from persival.model.arm.arm_model import ArmModel
             from persival.tables.open import open_tables
             from persival.tables.table_solve import TableSolver
 

@@ -22,7 +22,7 @@ import numpy as np
 from persival.file_header import check_header
 from persival.surrogate.dataset import Dataset, Surfaces
 
-__all__ = ["generate_training_data", "load_training_data", "sample_inputs"]
+__all__ = ["generate_training_data", "load_training_data", "open_dataset", "sample_inputs"]
 
 _FORMAT = "persival-training-data"
 _VERSION = 1  # folders written before the header had a version are version 1
@@ -118,3 +118,9 @@ def load_training_data(path: str | Path) -> Dataset:
               "label": f"SG data ({meta['source'].get('generator')}) of {meta['source'].get('label')}"}
     return Dataset(g["activations"][:], g["positions"][:], g["elbow_angles"][:], Surfaces.load(path / "surfaces.npz"),
                    source, np.asarray(g["target_deg"][:]))
+
+
+def open_dataset(path: str | Path) -> Dataset:
+    """A dataset folder: the training-data generator's (training_data.json) or :meth:`Dataset.save`'s."""
+    path = Path(path)
+    return load_training_data(path) if (path / "training_data.json").exists() else Dataset.load(path)

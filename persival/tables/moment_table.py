@@ -5,7 +5,7 @@ about the hinge depend only on the elbow angle theta and its own activation a_m 
 the joint equilibrium of any activation vector is the scalar equation
 ``sum_m M_m(theta, a_m) + M_gravity(theta) + M_passive_joint(theta) = 0`` with
 ``M_m = -(T_m dL_m/dtheta + dPi_c/dtheta)`` (flexion positive; the second term is the work of the
-bones the muscle wraps over, persival.model.muscle_unit). A table holds, per muscle and
+bones the muscle wraps over, persival.model.arm.muscle_unit). A table holds, per muscle and
 activation level, the FE tension, moment and moment slope dM/dtheta at each angle, computed by
 continuation along theta from a stretched start (:func:`sweep_muscle`, also behind
 ``persival curves``), NaN where a solve fails. Between the tabulated angles the moment is a
@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from persival.file_header import check_header
-from persival.model.solver import ConvergenceError
+from persival.model.fe.solver import ConvergenceError
 from persival.vocabulary import MUSCLES
 
 __all__ = ["MomentTable", "TableMismatchError", "build_moment_table", "empty_moment_table",
@@ -288,7 +288,7 @@ def build_moment_table(arm_or_profile, angles_deg, activations, progress=None, o
                        model_file: str | Path | None = None, muscles=None) -> MomentTable:
     """FE moment table of every muscle on ``angles_deg`` x ``activations`` (docs/theory.md, 4.5).
 
-    ``arm_or_profile``: an :class:`~persival.model.arm.ArmModel` or a profile name. With ``out``
+    ``arm_or_profile``: an :class:`~persival.model.arm.arm_model.ArmModel` or a profile name. With ``out``
     the table is saved after every (muscle, level) column and an existing file there is
     resumed: finished columns are kept (it must be of the same model, profile and grid).
     ``muscles``: compute only these muscles' columns (the others stay unfinished).
@@ -298,7 +298,7 @@ def build_moment_table(arm_or_profile, angles_deg, activations, progress=None, o
     angles, levels = check_grids(angles_deg, activations)
     arm = arm_or_profile
     if isinstance(arm_or_profile, str):
-        from persival.model.arm import ArmModel
+        from persival.model.arm.arm_model import ArmModel
 
         arm = ArmModel(model_file, profile=arm_or_profile)
     table = resumable(out, arm.model_hash, arm.profile, angles, levels) if out is not None else None

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from persival.model.arm import ArmModel
-from persival.model.solver import ConvergenceError
+from persival.model.arm.arm_model import ArmModel
+from persival.model.fe.solver import ConvergenceError
 
 
 def open_tables(arm: ArmModel, tables: str | None = None):
     """The complete response table of ``arm`` (default folder: its state cache), or a clear error."""
-    from persival.model.state_cache import mesh_fingerprint
+    from persival.model.arm.state_cache import mesh_fingerprint
     from persival.tables.response_table import ResponseTable, default_table_dir, refuse_touching_muscles
 
     refuse_touching_muscles(arm)

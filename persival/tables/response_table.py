@@ -33,8 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from persival.file_header import check_header
-from persival.model.muscle_state import MuscleState
-from persival.model.state_cache import mesh_fingerprint
+from persival.model.arm.muscle_state import MuscleState
+from persival.model.arm.state_cache import mesh_fingerprint
 from persival.tables.moment_table import MomentTable, TableMismatchError, check_grids, empty_moment_table, sweep_muscle
 from persival.vocabulary import MUSCLES
 
@@ -244,7 +244,7 @@ def _longest_state(table: ResponseTable, muscle: str, level: int) -> MuscleState
 
 def build_muscle_columns(model_file, profile: str, root: str, muscle: str) -> dict:
     """Compute every unfinished column of one muscle (a dask task, or inline). Returns timings."""
-    from persival.model.arm import ArmModel
+    from persival.model.arm.arm_model import ArmModel
 
     t0 = time.perf_counter()
     arm = ArmModel(model_file, profile)

@@ -24,9 +24,9 @@ from dataclasses import replace
 import numpy as np
 from scipy.optimize import brentq
 
-from persival.model.muscle_state import MuscleState
-from persival.model.muscle_unit import ConvergenceError
-from persival.model.state_library import hermite_blend
+from persival.model.arm.muscle_state import MuscleState
+from persival.model.arm.muscle_unit import ConvergenceError
+from persival.model.arm.state_library import hermite_blend
 from persival.tables.response_table import ResponseTable
 from persival.vocabulary import MUSCLES, check_activation_vector
 

@@ -42,7 +42,7 @@ ANALYTIC = SimulatorSpec("analytic", {"mesh_size": 14.0})
 
 
 def _cli() -> typer.Typer:
-    from persival.campaign import commands
+    from persival.cli import campaign as commands
 
     app = typer.Typer()
     bench = typer.Typer()

@@ -2,7 +2,7 @@
 
 Reuses the session's tiny run of tests/evaluate/test_evaluate.py. The browser check (Debian's
 /usr/bin/chromium through playwright-core from the web viewer's node_modules) loads the page
-from disk, counts tables and decoded images, records console errors and takes a full-page
+from disk at 1280 px, counts tables and decoded images, checks that no table is wider than its box, records console errors and takes a full-page
 screenshot ($PERSIVAL_REPORT_SHOTS or the test's tmp folder).
 """
 
@@ -37,7 +37,7 @@ const profile = mkdtempSync(join(tmpdir(), 'persival-report-'));
 const result = { consoleErrors: [], pageErrors: [], failedRequests: [] };
 const browser = await chromium.launchPersistentContext(profile, {
   executablePath: process.env.CHROMIUM || '/usr/bin/chromium', headless: true,
-  viewport: { width: 1400, height: 900 }, args: ['--headless', '--no-sandbox', '--disable-gpu'] });
+  viewport: { width: 1280, height: 900 }, args: ['--headless', '--no-sandbox', '--disable-gpu'] });
 try {
   const page = await browser.newPage();
   page.on('console', (m) => { if (m.type() === 'error') result.consoleErrors.push(m.text()); });
@@ -46,7 +46,11 @@ try {
   await page.goto(url, { waitUntil: 'load' });
   Object.assign(result, await page.evaluate(() => ({
     tables: [...document.querySelectorAll('section.table')].map((s) => s.id),
-    images: [...document.images].map((i) => ({ alt: i.alt, w: i.naturalWidth, h: i.naturalHeight })) })));
+    images: [...document.images].map((i) => ({ alt: i.alt, w: i.naturalWidth, h: i.naturalHeight })),
+    // a table wider than its box hides columns behind a scroll bar at 1280 px
+    wide: [...document.querySelectorAll('.scroll')].filter((d) => d.scrollWidth > d.clientWidth + 1)
+      .map((d) => ({ table: d.closest('section')?.id, width: d.scrollWidth, box: d.clientWidth })),
+    pageWidth: document.documentElement.scrollWidth })));
   await page.screenshot({ path: shot, fullPage: true });
   result.ok = true;
 } catch (e) { result.ok = false; result.error = String(e); }
@@ -101,5 +105,6 @@ def test_report_opens_in_headless_chromium(report, tmp_path):
     assert result["ok"], result.get("error")
     assert result["consoleErrors"] == [] and result["pageErrors"] == [] and result["failedRequests"] == []
     assert {t.removeprefix("table-") for t in result["tables"]} == {*TABLES, "bench_nn"}
+    assert result["wide"] == [] and result["pageWidth"] <= 1280, f"wider than 1280 px: {result['wide']}"
     assert result["images"] and all(i["w"] > 100 and i["h"] > 100 for i in result["images"])
     print(f"\nreport: {len(result['tables'])} tables, {len(result['images'])} figures, screenshot {shots / 'report.png'}")

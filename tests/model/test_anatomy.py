@@ -1,4 +1,4 @@
-"""Overlap between bodies and bed gaps (persival.model.anatomy_check, `persival anatomy`).
+"""Overlap between bodies and bed gaps (persival.model.anatomy.overlap, `persival anatomy`).
 
 Known answers on simple closed surfaces (boxes overlapping by an exact depth, spheres, a tube
 beside a rod at a known gap), and on the coarse arm's hanging state: the library's inside test
@@ -12,7 +12,7 @@ import json
 import numpy as np
 import pytest
 
-from persival.model.anatomy_check import Body, bed_gaps, overlaps
+from persival.model.anatomy.overlap import Body, bed_gaps, overlaps
 
 
 def _surface(mesh, shift=(0.0, 0.0, 0.0)):
@@ -100,8 +100,8 @@ def test_the_coarse_hanging_arm_inside_test_agrees_with_the_winding_number(tmp_p
 
     from persival.cli import app
     from persival.evaluate.anatomy import check_state_dirs
-    from persival.model.arm import ArmModel
-    from persival.model.output import write_state
+    from persival.model.arm.arm_model import ArmModel
+    from persival.model.arm.output import write_state
 
     arm = ArmModel(profile="coarse")
     state_dir = write_state(arm, arm.base_state(), tmp_path / "run" / "fe" / "hanging")
@@ -112,7 +112,7 @@ def test_the_coarse_hanging_arm_inside_test_agrees_with_the_winding_number(tmp_p
     import meshio
 
     from persival.evaluate.anatomy import _muscle_ends, _tet10_surface
-    from persival.model.anatomy_check import signed_distance
+    from persival.model.anatomy.overlap import signed_distance
 
     def body(name):
         mesh = meshio.read(state_dir / f"{name}.vtu")
@@ -170,8 +170,9 @@ def test_outlines_are_the_muscles_cross_sections_and_overlaps_are_refused_by_nam
     """The model file's outlines across the humerus (before meshing): where a centre line runs
     nearly along the humerus its outline is a circle of the station's radius about it; the
     default's overlapping outlines are refused in one message naming the muscles and the level."""
-    from persival.model.arm_body import ArmKinematics, muscle_profile
-    from persival.model.cross_sections import OutlineOverlapError, check_outlines, outlines_at
+    from persival.model.anatomy.muscle_sweep import muscle_profile
+    from persival.model.arm.cross_sections import OutlineOverlapError, check_outlines, outlines_at
+    from persival.model.arm.kinematics import ArmKinematics
 
     arm = ArmKinematics()
     z = 150.0
@@ -196,10 +197,10 @@ def test_a_layout_that_leaves_the_skin_is_refused_naming_the_muscle_and_level(tm
     10 mm narrower front to back is refused before anything is meshed, naming the biceps."""
     from pathlib import Path
 
-    from persival.model.arm_body import ArmKinematics
-    from persival.model.cross_sections import OutlineOverlapError, outline_overlaps, skin_at
+    from persival.model.arm.cross_sections import OutlineOverlapError, outline_overlaps, skin_at
+    from persival.model.arm.kinematics import ArmKinematics
 
-    source = Path("persival/model/variants/atlas_walls.toml")
+    source = Path("persival/model/arm/variants/atlas_walls.toml")
     atlas = ArmKinematics(source)  # checked on loading: nothing overlaps or leaves the skin
     assert not outline_overlaps(atlas)
     ring = skin_at(atlas.spec, 145.0)

@@ -7,10 +7,11 @@ import pytest
 from typer.testing import CliRunner
 
 from persival.cli import app
-from persival.model.arm import ArmModel, muscle_profile
-from persival.model.arm_file import ModelFileError, load_model_file
-from persival.model.defaults import default_model_path, packaged_models, resolve_model_path
-from persival.model.geometry import swept_solid_mesh
+from persival.model.anatomy.schema import ModelFileError
+from persival.model.arm.arm_model import ArmModel, muscle_profile
+from persival.model.arm.defaults import default_model_path, packaged_models, resolve_model_path
+from persival.model.arm.model_file import load_model_file
+from persival.model.fe.geometry import swept_solid_mesh
 from persival.vocabulary import MUSCLES
 
 

@@ -26,7 +26,7 @@ def test_reference_surfaces_are_closed_and_outward(simulator):
         volume = np.einsum("ij,ij->i", p[tri[:, 0]], np.cross(p[tri[:, 1]], p[tri[:, 2]])).sum() / 6.0
         body = simulator.arm.mesh
         cells = simulator.arm.muscle_cells[name]
-        from persival.model.mesh import Tet10Mesh
+        from persival.model.fe.mesh import Tet10Mesh
 
         nodes = simulator.arm.muscle_nodes[name]
         fe_volume = Tet10Mesh(body.points[nodes], body.cells[cells] - nodes[0]).volume()
@@ -48,7 +48,7 @@ def test_tissue_layout_and_fibres(simulator):
 
 
 def test_bones_rotate_with_the_elbow(simulator):
-    from persival.model.output import bone_surfaces
+    from persival.model.arm.output import bone_surfaces
 
     straight, flexed = bone_surfaces(simulator.arm, 0.0), bone_surfaces(simulator.arm, 90.0)
     assert np.allclose(straight["humerus"][0], flexed["humerus"][0])

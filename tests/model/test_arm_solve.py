@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from persival.model.arm import ArmModel
-from persival.model.solver import ConvergenceError
-from persival.model.state_cache import mesh_fingerprint
+from persival.model.arm.arm_model import ArmModel
+from persival.model.arm.state_cache import mesh_fingerprint
+from persival.model.fe.solver import ConvergenceError
 from persival.tables.moment_table import TableMismatchError
 from persival.tables.response_table import ResponseTable
 from persival.tables.table_solve import TableSolver
@@ -34,7 +34,7 @@ def arm():
     return ArmModel(profile="coarse")
 
 
-REPORTS = []  # progress of the direct solve (persival.model.progress)
+REPORTS = []  # progress of the direct solve (persival.model.arm.progress)
 #: The direct solve's activations: the biceps near half, every muscle off the fixture table's
 #: levels (0, 0.5, 1), so the exact path's comparison below interpolates in a for all five.
 DIRECT = [0.45, 0.1, 0.15, 0.05, 0.1]
@@ -148,7 +148,7 @@ def test_non_convergence_is_a_clear_error_and_writes_nothing(arm, states, tmp_pa
 def test_state_files_and_render(arm, states, tmp_path):
     pytest.importorskip("pyvista")
     from persival.evaluate.render import render_states
-    from persival.model.output import write_state
+    from persival.model.arm.output import write_state
 
     dirs = [write_state(arm, s, tmp_path / f"state{k}") for k, s in enumerate(states[:3])]
     summary = json.loads((dirs[2] / "state.json").read_text())
@@ -172,7 +172,7 @@ def test_held_arm_carries_the_joint_residual_and_draws(arm, states, tmp_path):
     pytest.importorskip("pyvista")
     from persival.evaluate.render import render_states
     from persival.evaluate.sections import _outline, render_sections
-    from persival.model.output import write_state
+    from persival.model.arm.output import write_state
 
     half, offset = states[1], 2.0
     held = arm.hold(half.activations, half.elbow_angle_deg + offset, warm_start=half)
@@ -201,7 +201,7 @@ def test_render_without_a_display_is_quiet(arm, states, tmp_path):
     import sys
 
     pytest.importorskip("pyvista")
-    from persival.model.output import write_state
+    from persival.model.arm.output import write_state
 
     folder = write_state(arm, states[0], tmp_path / "hanging")
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "VTK_DEFAULT_OPENGL_WINDOW")}

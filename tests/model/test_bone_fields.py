@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import pyvista as pv
 
-from persival.model.bone_fields import sampled_field
-from persival.model.rotations import rotation_about
+from persival.model.anatomy.bone_fields import sampled_field
+from persival.model.fe.rotations import rotation_about
 
 RADIUS = 12.0
 
@@ -67,8 +67,8 @@ def test_points_off_the_grid_are_not_in_contact(sphere_field):
 
 def _block_on_ball(field, ends=None, end_distance=0.0):
     """A 10 mm block whose lower face dips into the ball's top, its contact at the surface nodes."""
-    from persival.model.contact import ObstacleContact
-    from persival.model.geometry import box_mesh
+    from persival.model.fe.contact import ObstacleContact
+    from persival.model.fe.geometry import box_mesh
 
     mesh = box_mesh((2, 2, 2), (10.0, 10.0, 10.0))
     x = mesh.points + [-5.0, -5.0, RADIUS - 1.5]
@@ -86,7 +86,7 @@ def test_contact_with_a_field_has_the_exact_tangent(sphere_field):
 
 
 def test_a_faded_field_scales_the_energy_by_its_share_squared(sphere_field):
-    from persival.model.obstacles import Faded
+    from persival.model.anatomy.obstacles import Faded
 
     contact, x = _block_on_ball(sphere_field)
     full = contact.energy(x)
@@ -110,10 +110,10 @@ def test_a_muscles_attachment_does_not_touch_the_bone_it_is_attached_to(sphere_f
 def test_a_forearm_bone_turns_with_the_elbow_by_its_shaped_surface():
     """The atlas arm's radius as a contact obstacle (bone_obstacles with its field): at 90 deg its
     shaped surface, turned about the hinge, is the field's zero level."""
-    from persival.model.arm_file import load_model_file
-    from persival.model.bone_shapes import bone_shapes
-    from persival.model.defaults import default_model_path
-    from persival.model.obstacles import bone_obstacles
+    from persival.model.anatomy.bone_shapes import bone_shapes
+    from persival.model.anatomy.obstacles import bone_obstacles
+    from persival.model.arm.defaults import default_model_path
+    from persival.model.arm.model_file import load_model_file
 
     spec, _ = load_model_file(default_model_path().parent / "variants" / "atlas_walls.toml")
     points, triangles = bone_shapes(spec)["radius"]
@@ -132,11 +132,11 @@ def test_a_forearm_bone_turns_with_the_elbow_by_its_shaped_surface():
 def test_a_model_with_bone_surfaces_gives_its_muscles_the_shaped_bones(tmp_path):
     """`[contact] bone_surfaces = true`: the bones a muscle wraps reach it as distance fields (its
     walls stay planes), with its attachments spared; without it, as capsules."""
-    from persival.model.arm import ArmModel
-    from persival.model.arm_body import ArmBody
-    from persival.model.bone_fields import DistanceField
-    from persival.model.defaults import default_model_path
-    from persival.model.obstacles import Capsule
+    from persival.model.anatomy.bone_fields import DistanceField
+    from persival.model.anatomy.obstacles import Capsule
+    from persival.model.arm.arm_model import ArmModel
+    from persival.model.arm.body import ArmBody
+    from persival.model.arm.defaults import default_model_path
 
     text = (default_model_path().parent / "variants" / "atlas_walls.toml").read_text()
     shaped = tmp_path / "shaped.toml"

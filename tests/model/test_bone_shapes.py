@@ -1,4 +1,4 @@
-"""Bones with their shapes (persival.model.bone_shapes): closed surfaces, sizes from the anatomy
+"""Bones with their shapes (persival.model.anatomy.bone_shapes): closed surfaces, sizes from the anatomy
 literature (docs/arm_model.md, "Bones"), the hinge through the trochlea and the capitulum, and the
 forearm bones turning about the humerus without entering it over the range the fossae take in."""
 
@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from persival.model.anatomy_check import Body, overlaps, signed_distance
-from persival.model.arm_body import ArmKinematics
-from persival.model.bone_shapes import ElbowFrame, _solids, articular_layout, bone_shapes
+from persival.model.anatomy.bone_shapes import ElbowFrame, _solids, articular_layout, bone_shapes
+from persival.model.anatomy.overlap import Body, overlaps, signed_distance
+from persival.model.arm.kinematics import ArmKinematics
 
 
 @pytest.fixture(scope="module")
@@ -96,8 +96,9 @@ def test_the_forearm_bones_turn_about_the_humerus_without_entering_it(arm, shape
 
 
 def test_a_model_file_sets_the_shape_and_keeps_its_defaults(tmp_path):
-    from persival.model.arm_file import ModelFileError, load_model_file
-    from persival.model.defaults import default_model_path
+    from persival.model.anatomy.schema import ModelFileError
+    from persival.model.arm.defaults import default_model_path
+    from persival.model.arm.model_file import load_model_file
 
     text = default_model_path().read_text()
     marker = 'radius = 10.0\n'
@@ -118,8 +119,8 @@ def test_the_viewer_skeleton_draws_the_shaped_bones_where_the_fe_states_write_th
     """The export's skeleton (docs/deployment.md) holds the shaped surfaces at 0 deg; turned by
     its own hinge formula they land on the bones the FE states are written with (output.py)."""
     from persival.campaign.skeleton import skeleton_for
-    from persival.model.output import bone_surfaces
-    from persival.model.rotations import rotation_about
+    from persival.model.arm.output import bone_surfaces
+    from persival.model.fe.rotations import rotation_about
 
     skeleton = skeleton_for("arm", {})
     centre, axis = np.array(skeleton["hinge"]["centre"]), np.array(skeleton["hinge"]["axis"])

@@ -7,14 +7,14 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from contact_differences import differences
 
-from persival.model.arm import muscle_profile, rotation_about
-from persival.model.arm_file import Bone, Muscle
-from persival.model.assembly import MaterialField
-from persival.model.constraints import Dirichlet
-from persival.model.contact import ObstacleContact, surface_node_weights
-from persival.model.geometry import box_mesh, swept_solid_mesh
-from persival.model.obstacles import Capsule, HalfSpace, bone_obstacles
-from persival.model.solver import QuasiStaticSolver, SolverOptions
+from persival.model.anatomy.obstacles import Capsule, HalfSpace, bone_obstacles
+from persival.model.anatomy.schema import Bone, Muscle
+from persival.model.arm.arm_model import muscle_profile, rotation_about
+from persival.model.fe.assembly import MaterialField
+from persival.model.fe.constraints import Dirichlet
+from persival.model.fe.contact import ObstacleContact, surface_node_weights
+from persival.model.fe.geometry import box_mesh, swept_solid_mesh
+from persival.model.fe.solver import QuasiStaticSolver, SolverOptions
 
 
 class DeadLoad:
@@ -224,8 +224,8 @@ def test_surface_weights_and_rigid_bone_motion():
 def wrapped_unit(with_bone: bool, activation_mesh_deg: float = 0.0, tie: str = "line", bone_radius: float = 8.0):
     """The wrapped muscle above as a MuscleUnit: origin fixed, insertion on a forearm turning about
     the x axis (the hinge), the cylinder (R = 8 mm) on that axis as its bone (SPEC 3.3 contact);
-    ``tie``: the insertion face's tie (persival.model.insertion_ties)."""
-    from persival.model.muscle_unit import MusclePath, MuscleUnit
+    ``tie``: the insertion face's tie (persival.model.arm.insertion_ties)."""
+    from persival.model.arm.muscle_unit import MusclePath, MuscleUnit
 
     R, r_t = 8.0, 2.5
     mesh, material, _ = wrapped_muscle(R + r_t + 0.3, 60.0, r_t)
@@ -252,7 +252,7 @@ def wrapped_unit(with_bone: bool, activation_mesh_deg: float = 0.0, tie: str = "
 
 @pytest.mark.slow
 def test_muscle_unit_moment_with_contact_is_the_work_on_its_faces(capsys):
-    """The unit's moment -(T L' + dPi_c/dtheta) (envelope theorem, persival.model.muscle_unit)
+    """The unit's moment -(T L' + dPi_c/dtheta) (envelope theorem, persival.model.arm.muscle_unit)
     equals the virtual work of its end faces' reactions in the world frame, computed without
     the contact term; its slope dM/dtheta and du/dtheta match central differences of solves."""
     unit, _ = wrapped_unit(True)
@@ -369,12 +369,12 @@ def test_forearm_tied_unit_moment_is_the_face_reaction_about_the_hinge(with_bone
 
 @pytest.mark.slow
 def test_variant_biceps_lies_on_the_humerus_at_150_deg(capsys):
-    """The shipped variant (persival/model/variants/biceps_on_humerus.toml, coarse mesh): its fully
+    """The shipped variant (persival/model/arm/variants/biceps_on_humerus.toml, coarse mesh): its fully
     active biceps, tied to the forearm and pressed on the humerus, at 150 deg stays outside the
     bone within the penalty's 0.5 mm, within SPEC 3.3's |J - 1| < 1 %, and still flexes (the
     default's straight biceps passes 9.4 mm into the bone there: docs/arm_model.md)."""
-    from persival.model.arm import ArmModel
-    from persival.model.defaults import default_model_path
+    from persival.model.arm.arm_model import ArmModel
+    from persival.model.arm.defaults import default_model_path
 
     def deepest_in_humerus(points):
         inside = (points[:, 2] > 12.0) & (points[:, 2] < 300.0)

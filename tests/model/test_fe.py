@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from persival.model.assembly import MaterialField
-from persival.model.constraints import Dirichlet, Hinge
-from persival.model.geometry import box_mesh, spindle, spindle_material
-from persival.model.material import DEFAULT_PARAMETERS, force_length
-from persival.model.mesh import MeshError, Tet10Mesh
-from persival.model.solver import ConvergenceError, InvertedStartError, QuasiStaticSolver
+from persival.model.fe.assembly import MaterialField
+from persival.model.fe.constraints import Dirichlet, Hinge
+from persival.model.fe.geometry import box_mesh, spindle, spindle_material
+from persival.model.fe.material import DEFAULT_PARAMETERS, force_length
+from persival.model.fe.mesh import MeshError, Tet10Mesh
+from persival.model.fe.solver import ConvergenceError, InvertedStartError, QuasiStaticSolver
 
 X_FIBRE = np.array([1.0, 0.0, 0.0])
 
@@ -92,7 +92,7 @@ def analytic_uniaxial_force(stretch, activation, muscle_fraction, bulk_modulus, 
 @pytest.mark.parametrize(
     "stretch, activation, muscle_fraction, prestretch",
     # the prestretched cases go through the assembled element kernel (numba-cached apart from the
-    # law's module, persival.model.kernel_cache): they fail if it ran a stale law
+    # law's module, persival.model.fe.kernel_cache): they fail if it ran a stale law
     [(1.2, 0.0, 1.0, 1.0), (1.25, 1.0, 1.0, 1.0), (0.9, 1.0, 1.0, 1.0), (1.04, 0.0, 0.0, 1.0), (1.1, 0.5, 0.5, 1.0),
      (1.0, 1.0, 1.0, 1.27), (0.85, 1.0, 1.0, 1.27), (1.1, 0.0, 1.0, 1.3)],
 )

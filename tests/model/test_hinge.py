@@ -8,9 +8,9 @@ mechanism). The lever carries a weight-like moment -W sin(theta).
 import numpy as np
 import pytest
 
-from persival.model.constraints import Hinge
-from persival.model.geometry import spindle_material, swept_solid_mesh
-from persival.model.solver import QuasiStaticSolver, SolverOptions
+from persival.model.fe.constraints import Hinge
+from persival.model.fe.geometry import spindle_material, swept_solid_mesh
+from persival.model.fe.solver import QuasiStaticSolver, SolverOptions
 
 ORIGIN = np.array([0.0, 15.0, 120.0])
 INSERTION = np.array([0.0, 8.0, -30.0])  # lever frame at theta = 0

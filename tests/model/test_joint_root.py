@@ -1,4 +1,4 @@
-"""The joint iteration's stopping rule (persival/model/arm.py, ArmModel._equilibrium), on a moment
+"""The joint iteration's stopping rule (persival/model/arm/arm_model.py, ArmModel._equilibrium), on a moment
 balance with a noise floor: muscles in contact with a wall reach their own tolerance with a
 residual noise of a few hundredths of a N mm, so the joint's g changes sign across a hair's
 width of angle without dropping below the moment tolerance."""
@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from persival.model.progress import SolveTracker
-from persival.model.solver import ConvergenceError
+from persival.model.arm.progress import SolveTracker
+from persival.model.fe.solver import ConvergenceError
 
 ROOT_DEG, STIFFNESS = 33.4, 7600.0  # N mm/rad, the hanging arm's joint stiffness in the atlas arm
 

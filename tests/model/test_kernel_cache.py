@@ -1,6 +1,6 @@
-"""numba's kernel cache follows the law it inlines (persival.model.kernel_cache)."""
+"""numba's kernel cache follows the law it inlines (persival.model.fe.kernel_cache)."""
 
-from persival.model.kernel_cache import drop_stale_kernels
+from persival.model.fe.kernel_cache import drop_stale_kernels
 
 
 def test_cached_kernels_are_dropped_when_a_dependency_changes(tmp_path):

@@ -1,4 +1,4 @@
-"""Laplace fibres (persival.model.laplace_fibres) that are finite and unit on any repaired surface,
+"""Laplace fibres (persival.model.anatomy.laplace_fibres) that are finite and unit on any repaired surface,
 and the mesh-time check that refuses a muscle whose fibres are not."""
 
 from __future__ import annotations
@@ -8,13 +8,13 @@ import pytest
 from surface_files import SPINDLE_LENGTH, model_with_surface, spindle, write_obj
 from typer.testing import CliRunner
 
-import persival.model.surface_muscle as surface_muscle_module
+import persival.model.anatomy.surface_muscle as surface_muscle_module
 from persival.cli import app
-from persival.model.arm_body import ArmBody
-from persival.model.geometry import box_mesh
-from persival.model.laplace_fibres import laplace_fibres
-from persival.model.mesh import MeshError
-from persival.model.surface_muscle import check_fibres, surface_muscle
+from persival.model.anatomy.laplace_fibres import laplace_fibres
+from persival.model.anatomy.surface_muscle import check_fibres, surface_muscle
+from persival.model.arm.body import ArmBody
+from persival.model.fe.geometry import box_mesh
+from persival.model.fe.mesh import MeshError
 
 COARSE_BICEPS = 16.0  # mm, the coarse profile's biceps element size
 INSET = 25.0  # mm from each tip to its end point: the attachment faces cut a tendon stub off behind them

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from persival.model import linear_solver
-from persival.model.linear_solver import HAVE_PARDISO, PARDISO_IMPORT_ERROR, SparseSymmetricSolver
+from persival.model.fe import linear_solver
+from persival.model.fe.linear_solver import HAVE_PARDISO, PARDISO_IMPORT_ERROR, SparseSymmetricSolver
 
 needs_pardiso = pytest.mark.skipif(not HAVE_PARDISO, reason=f"MKL PARDISO: {PARDISO_IMPORT_ERROR or 'not installed'}")
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from persival.model.material import (
+from persival.model.fe.material import (
     DEFAULT_PARAMETERS,
     force_length,
     second_piola_kirchhoff,

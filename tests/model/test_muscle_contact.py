@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 from contact_differences import differences
 
-from persival.model.assembly import MaterialField
-from persival.model.constraints import Dirichlet
-from persival.model.geometry import box_mesh
-from persival.model.mesh import Tet10Mesh
-from persival.model.muscle_contact import ContactBody, MutualContact, onset_slope
-from persival.model.solver import QuasiStaticSolver, SolverOptions
+from persival.model.arm.muscle_contact import ContactBody, MutualContact, onset_slope
+from persival.model.fe.assembly import MaterialField
+from persival.model.fe.constraints import Dirichlet
+from persival.model.fe.geometry import box_mesh
+from persival.model.fe.mesh import Tet10Mesh
+from persival.model.fe.solver import QuasiStaticSolver, SolverOptions
 
 
 def two_blocks(overlap: float, shift=(0.3, 0.2), divisions=(2, 2, 2)):
@@ -53,7 +53,7 @@ def test_two_blocks_pressed_into_each_other_part_at_the_penalty_depth(push, seca
     material = MaterialField.from_cells(4, [0.0, 0.0, 1.0], 1.0, 50.0, n_cells=mesh.n_cells)
     clamps = [Dirichlet("left", cube.node_sets["x0"]), Dirichlet("right", cube.node_sets["x1"] + n, end=[-push, 0, 0])]
     # the force turns where a point passes from one element of the other block into the next:
-    # Newton stops at the group's floor (persival.model.muscle_group.MuscleGroup.contact_atol)
+    # Newton stops at the group's floor (persival.model.arm.muscle_group.MuscleGroup.contact_atol)
     options = SolverOptions(atol=1e-3, secant_predictor=secant_predictor)
     solver = QuasiStaticSolver(mesh, material, clamps, options, extra_terms=[contact])
     solution = solver.solve(0.0)
@@ -75,7 +75,7 @@ def test_two_blocks_pressed_into_each_other_part_at_the_penalty_depth(push, seca
 
 def touching_arm(tmp_path):
     """A copy of the shipped variant whose biceps and brachialis touch each other."""
-    from persival.model.defaults import default_model_path
+    from persival.model.arm.defaults import default_model_path
 
     path = tmp_path / "touching.toml"
     path.write_text((default_model_path().parent / "variants" / "atlas_touching.toml").read_text())
@@ -87,7 +87,7 @@ def test_a_group_apart_gives_each_muscle_its_own_units_state(tmp_path):
     """Opened from the 60 deg mesh pose to 65 deg, biceps and brachialis do not touch (from 57 deg
     down they do): solved as one group in the world frame, each muscle's moment, slope, tension
     and shape are those of its own unit."""
-    from persival.model.arm import ArmModel
+    from persival.model.arm.arm_model import ArmModel
     from persival.tables.response_table import ResponseTable
 
     arm = ArmModel(touching_arm(tmp_path), profile="coarse")
@@ -112,7 +112,7 @@ def test_a_group_apart_gives_each_muscle_its_own_units_state(tmp_path):
 
 
 def test_a_model_file_refuses_a_muscle_in_two_groups_or_an_unknown_one(tmp_path):
-    from persival.model.arm_file import load_model_file
+    from persival.model.arm.model_file import load_model_file
 
     path = touching_arm(tmp_path)
     for groups, word in (('[["biceps", "brachialis"], ["biceps", "triceps"]]', "one group at most"),

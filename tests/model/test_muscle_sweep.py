@@ -1,4 +1,4 @@
-"""Muscles lofted through outlines (persival.model.muscle_sweep, the atlas variant): the centre line
+"""Muscles lofted through outlines (persival.model.anatomy.muscle_sweep, the atlas variant): the centre line
 runs through every outline's centre, the sections are its ellipses, the gmsh solid has their
 volume, the shipped atlas layout overlaps nowhere at the check's levels, and bad layouts are
 refused when the model file is read."""
@@ -10,9 +10,10 @@ import re
 import numpy as np
 import pytest
 
-from persival.model.arm_body import ArmKinematics
-from persival.model.arm_file import ModelFileError, load_model_file
-from persival.model.defaults import default_model_path
+from persival.model.anatomy.schema import ModelFileError
+from persival.model.arm.defaults import default_model_path
+from persival.model.arm.kinematics import ArmKinematics
+from persival.model.arm.model_file import load_model_file
 
 ATLAS = default_model_path().parent / "variants" / "atlas_arm.toml"
 
@@ -55,7 +56,7 @@ def test_the_lofted_ellipses_have_the_volume_of_their_sections(atlas):
 
 
 def test_the_atlas_layout_overlaps_nowhere_and_the_default_is_not_checked(atlas):
-    from persival.model.cross_sections import outline_overlaps
+    from persival.model.arm.cross_sections import outline_overlaps
 
     assert outline_overlaps(atlas) == []
     assert len(outline_overlaps(ArmKinematics())) > 0  # spindles: read, not refused (no outlines in the file)
@@ -70,7 +71,7 @@ def _atlas_with(tmp_path, old: str, new: str):
 
 
 def test_overlapping_outlines_are_refused_naming_the_muscles_and_the_level(tmp_path):
-    from persival.model.cross_sections import OutlineOverlapError
+    from persival.model.arm.cross_sections import OutlineOverlapError
 
     path = _atlas_with(tmp_path, "{ z = 81.7, centre = [-2.0, 21.0], semi_axes = [20.0, 9.0] }",
                        "{ z = 81.7, centre = [-2.0, 32.0], semi_axes = [20.0, 9.0] }")
@@ -102,7 +103,7 @@ def test_the_built_in_mesh_is_still_the_fixture_tables_mesh():
     import json
     from pathlib import Path
 
-    from persival.model.arm_body import ArmBody
+    from persival.model.arm.body import ArmBody
     from persival.tables.response_table import mesh_fingerprint
 
     header = json.loads((Path(__file__).parents[1] / "data" / "response_table_coarse" / "header.json").read_text())

@@ -10,11 +10,11 @@ from surface_files import SPINDLE_LENGTH, model_with_surface, spindle, with_defe
 from typer.testing import CliRunner
 
 from persival.cli import app
-from persival.model.arm_body import ArmBody
-from persival.model.arm_file import load_model_file
-from persival.model.defaults import default_model_path
-from persival.model.surface_mesh import volume_mesh
-from persival.model.surface_muscle import surface_muscle
+from persival.model.anatomy.surface_mesh import volume_mesh
+from persival.model.anatomy.surface_muscle import surface_muscle
+from persival.model.arm.body import ArmBody
+from persival.model.arm.defaults import default_model_path
+from persival.model.arm.model_file import load_model_file
 
 COARSE_BICEPS = 16.0  # mm, the coarse profile's biceps element size
 
@@ -162,8 +162,8 @@ def test_persival_mesh_writes_the_muscle_files_and_report(surfaces, tmp_path):
 def test_a_biceps_from_a_surface_is_solved(surfaces):
     """The defects OBJ's biceps in the coarse arm: its FE unit pulls on the line of action (M = T r,
     r = -dL/dtheta exactly, the line tie), with the tension of its active belly."""
-    from persival.model.arm import ArmModel
-    from persival.model.material import MaterialParameters
+    from persival.model.arm.arm_model import ArmModel
+    from persival.model.fe.material import MaterialParameters
 
     model = model_with_surface(surfaces["root"] / "solve.toml", "defects.obj", replace={"fibre_prestretch": "1.0"})
     arm = ArmModel(model, "coarse")
@@ -213,9 +213,9 @@ def test_a_surface_that_one_feature_angle_cannot_reparametrize_is_remeshed_at_th
     import trimesh
     from surface_files import biceps_like
 
-    from persival.model.surface_import import read_surface
-    from persival.model.surface_mesh import CLASSIFY_ANGLES_DEG, _add_surface
-    from persival.model.surface_repair import repair_surface
+    from persival.model.anatomy.surface_import import read_surface
+    from persival.model.anatomy.surface_mesh import CLASSIFY_ANGLES_DEG, _add_surface
+    from persival.model.anatomy.surface_repair import repair_surface
 
     vertices, faces, _, _ = biceps_like()
     defective = with_defects(vertices, faces, duplicates=40, flips=25, hole=(2000, 2001), seed=5)
@@ -271,7 +271,7 @@ def test_the_run_fits_the_deployed_model_to_its_own_model_file(monkeypatch, tmp_
 def test_a_fin_on_an_edge_is_removed_and_counted():
     """A stray triangle on an edge of the surface (three triangles on one edge: non-manifold) goes,
     not one of the surface's own; what is left is the clean spindle."""
-    from persival.model.surface_repair import repair_surface
+    from persival.model.anatomy.surface_repair import repair_surface
 
     vertices, faces = spindle()
     a, b = faces[200][:2]

@@ -1,9 +1,9 @@
-"""The kept-state library (persival.model.state_library): spacing, size cap, Hermite guesses."""
+"""The kept-state library (persival.model.arm.state_library): spacing, size cap, Hermite guesses."""
 
 import numpy as np
 
-from persival.model.muscle_state import MuscleState
-from persival.model.state_library import StateLibrary
+from persival.model.arm.muscle_state import MuscleState
+from persival.model.arm.state_library import StateLibrary
 
 
 def _state(theta_deg: float, activation: float = 0.5, with_slope: bool = True) -> MuscleState:

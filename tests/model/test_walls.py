@@ -1,4 +1,4 @@
-"""Fascial walls (persival.model.walls): a septum's window and a sleeve give the exact contact
+"""Fascial walls (persival.model.anatomy.walls): a septum's window and a sleeve give the exact contact
 force and tangent (central differences of the energy and of the force), a septum acts only in its
 band and keeps each muscle to the side it is meshed on, and a model file's walls reach the
 muscles that name them."""
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from contact_differences import differences
 
-from persival.model.contact import ObstacleContact
-from persival.model.geometry import box_mesh
-from persival.model.obstacles import Capsule
-from persival.model.walls import Septum, Sleeve, septum_sides, wall_obstacles
+from persival.model.anatomy.obstacles import Capsule
+from persival.model.anatomy.walls import Septum, Sleeve, septum_sides, wall_obstacles
+from persival.model.fe.contact import ObstacleContact
+from persival.model.fe.geometry import box_mesh
 
 
 def test_septum_and_sleeve_tangents_match_finite_differences():
@@ -38,7 +38,7 @@ def test_septum_acts_only_in_its_band_and_keeps_each_side():
     assert g[0] == 0.0 and g[3] == 0.0  # below and above the band
     assert 0.0 < g[1] < 5.0 and g[2] == pytest.approx(5.0) and g[4] < 0.0  # ramping in, fully on, free side
 
-    class Wall:  # a model-file entry (persival.model.arm_file.Wall)
+    class Wall:  # a model-file entry (persival.model.arm.model_file.Wall)
         name, kind, segment = "septum", "septum", "upper_arm"
         point, normal, along, band, ramp = (0.0, 30.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (40.0, 160.0), 20.0
         turns = 0.0
@@ -53,12 +53,12 @@ def test_septum_acts_only_in_its_band_and_keeps_each_side():
 
 
 def test_the_atlas_walls_variant_keeps_biceps_and_brachialis_on_either_side_of_its_septum():
-    """persival/model/variants/atlas_walls.toml: the septum reaches both muscles, turned so that
+    """persival/model/arm/variants/atlas_walls.toml: the septum reaches both muscles, turned so that
     each keeps to the side it is laid out on (the sides from its centre line's stations here, from
     its mesh nodes in the arm), with the whole centre line on that side."""
-    from persival.model.arm import ArmModel
-    from persival.model.arm_body import ArmBody
-    from persival.model.defaults import default_model_path
+    from persival.model.arm.arm_model import ArmModel
+    from persival.model.arm.body import ArmBody
+    from persival.model.arm.defaults import default_model_path
 
     frame = ArmBody.frame(default_model_path().parent / "variants" / "atlas_walls.toml", "coarse")  # no mesh
     normals = {}
@@ -82,7 +82,7 @@ def test_the_atlas_walls_variant_keeps_biceps_and_brachialis_on_either_side_of_i
 def test_a_wall_that_turns_with_the_elbow_turns_about_its_pivot_smoothly():
     """``turns``: the fraction of the flexion beyond ``turns_from_deg``, a smooth onset; the plane
     turns about the axis through its pivot (a point there stays, one 100 mm away moves on a circle)."""
-    from persival.model.walls import turn_deg
+    from persival.model.anatomy.walls import turn_deg
 
     class Wall:  # a model-file entry that turns back with flexion about a pivot 140 mm up
         name, kind, segment = "septum", "septum", "upper_arm"
@@ -104,8 +104,9 @@ def test_a_wall_that_turns_with_the_elbow_turns_about_its_pivot_smoothly():
 
 
 def test_a_turning_wall_without_a_pivot_is_refused(tmp_path):
-    from persival.model.arm_file import ModelFileError, load_model_file
-    from persival.model.defaults import default_model_path
+    from persival.model.anatomy.schema import ModelFileError
+    from persival.model.arm.defaults import default_model_path
+    from persival.model.arm.model_file import load_model_file
 
     text = (default_model_path().parent / "variants" / "atlas_walls.toml").read_text()
     edited = text.replace("band = [45.0, 140.0]\n", "band = [45.0, 140.0]\nturns = -0.06\n", 1)

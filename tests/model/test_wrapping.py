@@ -1,10 +1,10 @@
-"""A tendon over a wrap cylinder on the hinge axis (SPEC 3.3 muscle paths, persival.model.wrapping)."""
+"""A tendon over a wrap cylinder on the hinge axis (SPEC 3.3 muscle paths, persival.model.anatomy.wrapping)."""
 
 import numpy as np
 import pytest
 
-from persival.model.rotations import rotation_about
-from persival.model.wrapping import WrapCylinder
+from persival.model.anatomy.wrapping import WrapCylinder
+from persival.model.fe.rotations import rotation_about
 
 AXIS, CENTRE = np.array([1.0, 0.0, 0.0]), np.zeros(3)
 ORIGIN, INSERTION = np.array([0.0, -22.0, 280.0]), np.array([3.0, -18.0, 16.0])  # a triceps
@@ -74,8 +74,8 @@ def test_an_end_inside_the_cylinder_is_refused():
 def test_an_unwrapped_body_ends_exactly_at_the_insertion():
     """Bit for bit: the mesh pose's centre line feeds gmsh, whose loft meshes a line that differs
     in the 14th digit differently (the brachioradialis: 1754 instead of 2548 nodes)."""
-    from persival.model.arm import ArmModel
-    from persival.model.arm_file import load_model_file
+    from persival.model.arm.arm_model import ArmModel
+    from persival.model.arm.model_file import load_model_file
 
     arm = ArmModel.__new__(ArmModel)  # geometry only: no meshing
     arm.spec, _ = load_model_file()

@@ -104,7 +104,7 @@ def test_adaptive_beats_regular_at_equal_budget_on_held_out_states(campaigns, tm
 
 
 def test_accuracy_command_writes_table_and_figure(campaigns, tmp_path):
-    from persival.evaluate import commands
+    from persival.cli import evaluate as commands
 
     app, bench = typer.Typer(), typer.Typer()
     app.add_typer(bench, name="bench")
@@ -155,7 +155,7 @@ def test_metrics_by_hand():
 
 @pytest.mark.slow
 def test_adapt_command_stops_on_tolerance_and_rejects_bad_input(tmp_path):
-    from persival.surrogate import commands
+    from persival.cli import surrogate as commands
 
     app, bench = typer.Typer(), typer.Typer()
     app.add_typer(bench, name="bench")

@@ -62,16 +62,16 @@ def test_activation_model_reproduces_the_solver_and_its_onnx(problem, small_run,
 
 
 def test_training_data_mixes_both_kinds_and_is_reproducible(small_run, tmp_path):
-    from persival.surrogate.dataset import Dataset
     from persival.surrogate.stage import make_training_data
+    from persival.surrogate.training_data import open_dataset
 
-    data = Dataset.load(small_run / "data")
+    data = open_dataset(small_run / "data")
     on_curve = ~np.isnan(data.target_deg)
     assert len(data) == 600 and on_curve.sum() == 300
     assert np.abs(data.elbow_angles[on_curve] - data.target_deg[on_curve]).max() < 0.5
     assert data.source["simulator"] == "analytic" and "SG data" in data.source["label"]
     again = make_training_data(small_run / "sg", small_run / "inverse" / "activation_model.json", tmp_path / "d", 600)
-    np.testing.assert_array_equal(Dataset.load(again).positions, data.positions)
+    np.testing.assert_array_equal(open_dataset(again).positions, data.positions)
     with pytest.raises(ValueError, match="another configuration"):
         make_training_data(small_run / "sg", small_run / "inverse" / "activation_model.json", tmp_path / "d", 500)
 

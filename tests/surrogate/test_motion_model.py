@@ -24,7 +24,7 @@ def table():
 @pytest.fixture(scope="module")
 def balance(table):
     """The deployed model's moment balance on the table (what the motion model solves on)."""
-    from persival.model.arm_file import load_model_file
+    from persival.model.arm.model_file import load_model_file
     from persival.surrogate.structured.moment_model import MomentModel
 
     return MomentModel.from_table(table, load_model_file(None)[0], near_deg=30.0)
@@ -152,7 +152,7 @@ def test_cli_builds_the_model_and_refuses_a_foreign_table(tmp_path):
     assert {p.name for p in (tmp_path / "m").iterdir()} >= {"motion_model.json", "motion_model.npz", "motion_model.png",
                                                              "activation_motion.onnx"}
     foreign = tmp_path / "foreign.toml"
-    from persival.model.defaults import default_model_path
+    from persival.model.arm.defaults import default_model_path
 
     foreign.write_text(default_model_path().read_text() + "\n# another model\n")
     result = runner.invoke(app, ["motion", "--table", str(FIXTURE), "--out", str(tmp_path / "x"), "--model", str(foreign)])

@@ -68,7 +68,7 @@ def _chain_angle(export, target):
 
 @pytest.mark.slow
 def test_csv_recording_with_a_load(motion_export, tmp_path):
-    from persival.model.arm_file import load_model_file
+    from persival.model.arm.model_file import load_model_file
     from persival.surrogate.motion_model import MotionActivationModel
     from persival.tables.moment_table import MomentTable
 

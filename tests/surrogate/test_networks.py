@@ -47,10 +47,10 @@ def test_randomized_pod_matches_the_gram_route():
 
 
 def test_networks_beat_the_mean_and_fold_the_reference_into_the_graph(small_run):
-    from persival.surrogate.base import load_surrogate
-    from persival.surrogate.dataset import Dataset
+    from persival.surrogate.open import load_surrogate
+    from persival.surrogate.training_data import open_dataset
 
-    data = Dataset.load(small_run / "data")
+    data = open_dataset(small_run / "data")
     for name in ("pod", "paper"):
         net = load_surrogate(small_run / "networks" / name)
         sub = data if name == "pod" else data.select(["biceps"])
@@ -72,10 +72,10 @@ def test_networks_beat_the_mean_and_fold_the_reference_into_the_graph(small_run)
 
 
 def test_training_resumes_after_a_kill(small_run, tmp_path):
-    from persival.surrogate.dataset import Dataset
     from persival.surrogate.training import TrainingConfig, train
+    from persival.surrogate.training_data import open_dataset
 
-    data = Dataset.load(small_run / "data").subset(np.arange(200))
+    data = open_dataset(small_run / "data").subset(np.arange(200))
     config = TrainingConfig(arch="pod", folds=2, epochs=3, rank=4)
     full, full_summary = train(data, config, tmp_path / "full")
 
@@ -98,7 +98,7 @@ def test_training_resumes_after_a_kill(small_run, tmp_path):
 def test_export_matches_pytorch_and_describes_itself(small_run):
     import onnxruntime as ort
 
-    from persival.surrogate.base import load_surrogate
+    from persival.surrogate.open import load_surrogate
 
     meta = json.loads((small_run / "export" / "metadata.json").read_text())
     pod = load_surrogate(small_run / "networks" / "pod")

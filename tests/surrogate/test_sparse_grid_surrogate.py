@@ -66,8 +66,8 @@ def test_bad_input(store):
 
 
 def test_all_muscles_in_one_grid_and_the_angle_column(store, tmp_path):
-    from persival.surrogate.base import load_surrogate
     from persival.surrogate.dataset import Dataset
+    from persival.surrogate.open import load_surrogate
 
     data = Dataset.from_store(store)
     assert data.surfaces.names == ("biceps", "brachialis", "brachioradialis", "triceps", "anconeus")

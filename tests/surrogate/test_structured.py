@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import torch
 
-from persival.model.external_moments import ExternalMoments
+from persival.model.arm.external_moments import ExternalMoments
 from persival.surrogate.structured.moment_model import MomentModel
 from persival.vocabulary import MUSCLES
 
@@ -210,7 +210,7 @@ def test_export_runs_in_onnxruntime_with_and_without_the_load(fitted, tmp_path):
     import onnxruntime as ort
 
     from persival.deploy.export import export_model
-    from persival.surrogate.base import load_surrogate
+    from persival.surrogate.open import load_surrogate
 
     again = load_surrogate(fitted.save(tmp_path / "structured"))
     assert again.kind == "structured"

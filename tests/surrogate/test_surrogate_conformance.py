@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from persival.surrogate.base import KINDS, MANIFEST, NotFittedError, Surrogate, load_surrogate
+from persival.surrogate.base import MANIFEST, NotFittedError, Surrogate
+from persival.surrogate.open import KINDS, load_surrogate
 
 pytestmark = pytest.mark.slow  # a shared fixture of this module takes minutes (make test-fast skips it)
 
@@ -22,7 +23,7 @@ FIXTURE = Path(__file__).parents[1] / "data" / "response_table_coarse"
 def _coarse_dataset():
     from persival.campaign.arm_simulator import muscle_surface
     from persival.campaign.simulator import SurfaceTopology
-    from persival.model.arm import ArmModel
+    from persival.model.arm.arm_model import ArmModel
     from persival.surrogate.dataset import Dataset, Surfaces
 
     arm = ArmModel(profile="coarse")

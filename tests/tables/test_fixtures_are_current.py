@@ -8,7 +8,7 @@ from pathlib import Path
 
 from conftest import REBUILD_TABLES
 
-from persival.model.arm_file import load_model_file
+from persival.model.arm.model_file import load_model_file
 from persival.tables.moment_table import MomentTable
 from persival.tables.response_table import ResponseTable
 

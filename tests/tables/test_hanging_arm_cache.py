@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from persival.model.arm import ArmModel
+from persival.model.arm.arm_model import ArmModel
 
 pytestmark = pytest.mark.slow  # continuations from the mesh poses take minutes (make test-fast skips it)
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from persival.model.arm_file import load_model_file
+from persival.model.arm.model_file import load_model_file
 from persival.tables.moment_table import MomentTable, TableMismatchError, build_moment_table
 from persival.vocabulary import MUSCLES
 
@@ -78,7 +78,7 @@ class _Kill(Exception):
 def test_fe_columns_resume_after_a_kill_and_agree_with_the_fixture(table, tmp_path):
     """Real FE sweeps (triceps, 60 and 80 deg, passive and active): the build is killed after
     its first column, the rerun skips it and computes only the other."""
-    from persival.model.arm import ArmModel
+    from persival.model.arm.arm_model import ArmModel
 
     arm = ArmModel(profile="coarse")
     out = tmp_path / "t.npz"

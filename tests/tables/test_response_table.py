@@ -235,8 +235,8 @@ def test_response_tables_answer_as_a_surrogate(arm, solver, tmp_path):
     """The table-only path behind the common surrogate interface: fit, predict, save, load."""
     from persival.campaign.arm_simulator import muscle_surface
     from persival.campaign.simulator import SurfaceTopology
-    from persival.surrogate.base import load_surrogate
     from persival.surrogate.dataset import Dataset, Surfaces
+    from persival.surrogate.open import load_surrogate
     from persival.surrogate.table_surrogate import ResponseTableSurrogate
 
     names = ("biceps", "triceps")

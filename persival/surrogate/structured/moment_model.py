@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import brentq
 
-from persival.model.external_moments import ExternalMoments
+from persival.model.arm.external_moments import ExternalMoments
 from persival.surrogate.structured.cardinal import hermite_weights, spline_weights
 from persival.vocabulary import MUSCLES
 

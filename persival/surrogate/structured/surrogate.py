@@ -72,7 +72,7 @@ class StructuredSurrogate(Surrogate):
     def fit(self, dataset: Dataset, progress=None) -> StructuredSurrogate:
         """Fit to the response tables of the arm that produced ``dataset``'s states, answering its surfaces."""
         from persival.campaign.arm_simulator import muscle_surface
-        from persival.model.arm import ArmModel
+        from persival.model.arm.arm_model import ArmModel
         from persival.tables.open import open_tables
 
         simulator = dataset.source.get("simulator")

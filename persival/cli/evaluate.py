@@ -1,0 +1,423 @@
+"""CLI commands of the evaluation stage (benchmarks, tables, figures)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from persival.cli.errors import check_output_dir, check_output_file, user_errors
+from persival.cli.help import FullHelpGroup
+from persival.cli.values import parse_numbers
+from persival.model.arm.defaults import profiles_help
+
+
+def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+    """Attach this stage's commands to the main app and the benchmark group."""
+    for command in (render, sections, curves, accuracy, anatomy, evaluate):
+        app.command()(command)
+    # `persival report --run RUN` writes the report; `persival report readme` copies its numbers into the docs
+    report_app = typer.Typer(cls=FullHelpGroup, help="One self-contained HTML page of a run (every table and figure, "
+                             "provenance): RUN/report/index.html; `report readme`: its numbers into README.md and "
+                             "docs/benchmarks.md.")
+    app.add_typer(report_app, name="report")
+    report_app.callback(invoke_without_command=True)(report)
+    report_app.command("readme")(readme)
+    bench_app.command("fe")(bench_fe)
+    bench_app.command("arm")(bench_arm)
+    bench_app.command("deployed")(bench_deployed)
+    bench_app.command("sg")(bench_sg)
+    bench_app.command("nn")(bench_nn)
+
+
+def render(
+    states: list[Path] = typer.Argument(..., help="State directories written by `persival simulate`."),
+    out: Path = typer.Option(Path("results/arm.png"), "--out", help="PNG file to write."),
+    muscles: str | None = typer.Option(None, "--muscles", help="Comma-separated muscles to draw (default: all)."),
+) -> None:
+    """Render solved arm states side by side (off-screen pyvista), coloured by displacement."""
+    from rich.console import Console
+
+    from persival.evaluate.render import render_states
+
+    console = Console()
+    with user_errors(out=out):
+        check_output_file(out)
+        path = render_states(states, out, muscles=muscles)
+    console.print(f"wrote {path}")
+
+
+def sections(
+    states: list[Path] = typer.Argument(..., help="State directories written by `persival simulate`."),
+    heights: str = typer.Option("100,150,200,250", "--heights", help="Comma-separated heights along the humerus (mm)."),
+    muscles: str | None = typer.Option(None, "--muscles", help="Comma-separated muscles to draw (default: all)."),
+    out: Path = typer.Option(Path("results/sections.png"), "--out", help="PNG file to write."),
+) -> None:
+    """Transverse sections of solved arm states: muscle and bone outlines across the upper arm."""
+    from rich.console import Console
+
+    from persival.evaluate.sections import render_sections
+
+    console = Console()
+    with user_errors(out=out):
+        check_output_file(out)
+        levels = parse_numbers(heights, "--heights", "mm")
+        path = render_sections(states, levels, out, muscles)
+    console.print(f"wrote {path}")
+
+
+def curves(
+    model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+    profile: str = typer.Option("quick", "--profile", help=profiles_help()),
+    out: Path = typer.Option(Path("results/curves"), "--out", help="Output directory (curves.json, curves.png)."),
+) -> None:
+    """Every muscle's passive and active moment against the elbow angle, and the equilibria they predict."""
+    import json
+
+    import numpy as np
+    from rich.console import Console
+    from rich.table import Table
+
+    from persival.evaluate.muscle_curves import REPORTED_SETS, band_check, muscle_curves, plot_curves, predicted_equilibrium
+    from persival.log_progress import progress_bar
+    from persival.model.arm.arm_model import ArmModel
+    from persival.model.arm.model_file import load_model_file
+
+    console = Console()
+    with user_errors():  # before the meshing
+        load_model_file(model)[0].profile(profile)
+        check_output_dir(out)
+        arm = ArmModel(model, profile)
+    tables = _curve_tables(console, arm)
+    with progress_bar(console=console) as bar:
+        task = bar.add_task("muscle sweeps", total=10)
+        data = muscle_curves(
+            arm, progress=lambda name, a: bar.update(task, advance=1, description=f"{name} at activation {a:g}"),
+            tables=tables)
+    table = Table(title="equilibria predicted by the curves (persival simulate solves them exactly)")
+    table.add_column("activations")
+    table.add_column("elbow angle (deg)", justify="right")
+    predicted = {}
+    for label, acts in REPORTED_SETS.items():
+        predicted[label] = predicted_equilibrium(data, acts)
+        table.add_row(label, f"{predicted[label]:.1f}")
+    console.print(table)
+    bands = band_check(data)
+    arms = Table(title="moment arms (mm, flexion +) against the physiological bands")
+    for column in ("muscle", "angles (deg)", "band", "model", "inside"):
+        arms.add_column(column)
+    for row in bands:
+        low, high = row["band_mm"]
+        arms.add_row(row["muscle"], "{:g} to {:g}".format(*row["angles_deg"]),
+                     f"{low:g} to {high:g}" if high is not None else f">= {low:g}",
+                     "{:.1f} to {:.1f}".format(*row["model_mm"]),
+                     {True: "yes", False: "[red]no[/red]", None: "not solved"}[row["inside"]])
+    console.print(arms)
+    out.mkdir(parents=True, exist_ok=True)
+    serial = {k: (v.tolist() if isinstance(v, np.ndarray) else {kk: vv.tolist() for kk, vv in v.items()})
+              for k, v in data.items()}
+    (out / "curves.json").write_text(json.dumps({"profile": profile, "curves": serial, "predicted_deg": predicted,
+                                                 "moment_arm_bands": bands}, indent=1))
+    console.print(f"wrote {out / 'curves.json'} and {plot_curves({**data, 'profile': profile}, out / 'curves.png')}")
+
+
+def accuracy(
+    test: Path = typer.Option(..., "--test", help="Campaign store of held-out states (e.g. a random design)."),
+    surrogate: list[str] = typer.Option(
+        ..., "--surrogate", help="LABEL=DIR of a fitted surface surrogate (fit-sg or adapt), repeatable."),
+    out: Path = typer.Option(Path("results/accuracy"), "--out", help="Output directory (accuracy.json, accuracy.png)."),
+) -> None:
+    """Surrogates vs held-out states (FE or analytic: the report says which): MaxAE, MAE, MaxRE, MRE, angle error."""
+    import json
+
+    from rich.console import Console
+    from rich.table import Table
+
+    from persival.campaign.store import StoreError
+    from persival.evaluate.surrogate_accuracy import accuracy_report, plot_accuracy
+
+    console = Console()
+    with user_errors(StoreError):
+        check_output_dir(out)
+        labelled = {}
+        for item in surrogate:
+            label, sep, path = item.partition("=")
+            if not sep or not label or not path:
+                raise ValueError(f"--surrogate expects LABEL=DIR, got {item!r}")
+            if not (Path(path) / "surrogate.json").is_file():
+                raise ValueError(f"--surrogate {item}: {path} is not a fitted surrogate (no surrogate.json; "
+                                 "make one with `persival surrogate fit-sg` or `surrogate adapt`)")
+            labelled[label] = Path(path)
+        report = accuracy_report(labelled, test)
+    table = Table(title=f"surface surrogates vs {report['test_source']['label']} held out ({test})")
+    columns = [("training states", "states", "{:d}"), ("MaxAE mm", "max MaxAE_mm", "{:.3f}"),
+               ("MAE mm", "mean MAE_mm", "{:.3f}"), ("MaxRE %", "max MaxRE_pct", "{:.2f}"),
+               ("MRE %", "mean MRE_pct", "{:.3f}"), ("max angle err deg", "max angle_error_deg", "{:.3f}"),
+               ("mean angle err deg", "mean angle_error_deg", "{:.3f}")]
+    table.add_column("surrogate")
+    table.add_column("grid")
+    for name, _, _ in columns:
+        table.add_column(name, justify="right")
+    for label, row in report["surrogates"].items():
+        table.add_row(label, row["kind"], *(fmt.format(row[key]) for _, key, fmt in columns))
+    console.print(table)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "accuracy.json").write_text(json.dumps(report, indent=1))
+    console.print(f"wrote {out / 'accuracy.json'} and {plot_accuracy(report, out / 'accuracy.png')}")
+
+
+def bench_fe(
+    mesh_size: float = typer.Option(6.3, min=1.0, help="Element size of the 40 x 300 mm spindle (mm)."),
+    activation: float = typer.Option(1.0, min=0.0, max=1.0, help="Activation of the benchmark state."),
+    repeats: int = typer.Option(5, min=1, help="Repetitions per timing (best is kept)."),
+    backend: str = typer.Option("auto", help="Sparse solver: auto, pardiso or scipy."),
+) -> None:
+    """Newton iteration vs sparse factorization on the paper-size spindle (target ratio <= 1.5)."""
+    from persival.evaluate.bench_fe import print_fe_benchmark, run_fe_benchmark
+    from persival.model.fe.linear_solver import SparseSymmetricSolver
+
+    with user_errors(RuntimeError):  # RuntimeError: pardiso asked for but not installed
+        SparseSymmetricSolver(backend)  # an unknown backend fails here, before the meshing
+        result = run_fe_benchmark(mesh_size, activation, repeats, backend)
+    print_fe_benchmark(result)
+
+
+def bench_arm(
+    profile: str = typer.Option("quick", "--profile", help="Mesh profile of the built-in arm."),
+    states: int = typer.Option(10, "--states", min=1, help="Random activation vectors for the per-state timings."),
+    direct: int = typer.Option(0, "--direct", min=0, help="Of those, also solve this many by the direct coupled solve "
+                               "(minutes each) and compare."),
+    campaign_level: int = typer.Option(2, "--campaign-level", min=0, max=3,
+                                       help="Run a sparse-grid campaign of this level through the runner (0: none)."),
+    out: Path | None = typer.Option(None, "--out", help="Also write the figures as JSON here."),
+) -> None:
+    """The FE arm at campaign scale: response tables, exact and table-only states, a campaign."""
+    import json
+
+    from rich.console import Console
+
+    from persival.evaluate.bench_arm import print_arm_benchmark, run_arm_benchmark
+    from persival.model.arm.model_file import load_model_file
+
+    with user_errors():
+        load_model_file()[0].profile(profile)
+        if out is not None:
+            check_output_file(out)
+    console = Console()
+    with console.status("FE arm benchmark") as status:
+        result = run_arm_benchmark(profile, states, min(direct, states), campaign_level,
+                                   progress=lambda text: status.update(f"FE arm benchmark: {text}"))
+    print_arm_benchmark(result)
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(result, indent=1, default=float))
+        console.print(f"wrote {out}")
+
+
+def bench_deployed(
+    run: Path = typer.Option(Path("results"), "--run", help="Run folder (persival run --out) of the FE arm."),
+    states: int = typer.Option(200, "--states", min=1, help="Random activation vectors solved by the exact FE path."),
+    seed: int = typer.Option(11, "--seed", help="Seed of the random activations (another than the run's held-out)."),
+) -> None:
+    """Every surrogate of a run against N more exact FE states (a resumable store under RUN/bench/)."""
+    import json
+
+    from persival.evaluate.bench_deployed import print_deployed_benchmark, run_deployed_benchmark
+
+    with user_errors():
+        result = run_deployed_benchmark(run, states, seed)
+    markdown = print_deployed_benchmark(result)
+    folder = Path(run) / "bench"
+    (folder / "deployed.json").write_text(json.dumps(result, indent=1, default=float))
+    (folder / "deployed.md").write_text(markdown)
+    typer.echo(f"wrote {folder / 'deployed.json'} and {folder / 'deployed.md'}")
+
+
+def bench_sg(
+    dim: int = typer.Option(5, min=1, help="Input dimension (activations)."),
+    level: int = typer.Option(2, min=1, help="Regular sparse-grid level."),
+    degree: int = typer.Option(3, min=1, help="Odd B-spline degree."),
+    n_out: int = typer.Option(2809 * 3 + 1, min=1, help="Outputs per state (surface xyz + angle)."),
+    batch: int = typer.Option(1000, min=1, help="Large batch size."),
+    reps: int = typer.Option(300, min=1, help="Repetitions at batch 1 (after warmup)."),
+) -> None:
+    """Seconds per whole-surface state of the sparse-grid surrogate, batch 1 and large batch."""
+    from persival.evaluate.bench_sparse_grid import print_benchmark, run_benchmark
+
+    with user_errors():
+        result = run_benchmark(dim=dim, level=level, degree=degree, n_out=n_out, batch=batch, reps_single=reps)
+    print_benchmark(result)
+
+
+def anatomy(
+    states: list[Path] = typer.Argument(None, help="State directories written by the FE stage or `persival simulate`."),
+    store: Path | None = typer.Option(None, "--store", help="Campaign store of the FE arm (instead of state directories)."),
+    model: Path | None = typer.Option(None, "--model", help="Model file the states were computed with "
+                                      "(default: a store's own, else the built-in arm)."),
+    attachment: float = typer.Option(10.0, "--attachment-mm", min=0.0, help="Leave out nodes this close to a "
+                                     "muscle's ends (its attachments)."),
+    outlines: bool = typer.Option(False, "--outlines", help="Instead: the model file's muscle outlines across the "
+                                  "humerus at 10/30/50/70/90 %, checked as polygons (no states needed)."),
+    run: Path | None = typer.Option(None, "--run", help="Instead: a run folder's FE and held-out states, as `persival "
+                                    "run`'s anatomy stage measures them (RUN/anatomy/)."),
+    out: Path | None = typer.Option(None, "--out", help="JSON file to write (every state, and the worst per pair)."),
+) -> None:
+    """Overlap between bodies (surface nodes inside another body, deepest penetration) and each muscle's gap to its bed."""
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from persival.campaign.store import StoreError
+    from persival.evaluate.anatomy import check_outlines_table, check_state_dirs, check_store, print_tables, write_json
+
+    console = Console()
+    with user_errors(StoreError, out=out):
+        if out is not None:
+            check_output_file(out)
+        if bool(states) + (store is not None) + outlines + (run is not None) != 1:
+            raise ValueError("give state directories, --store STORE, --run RUN or --outlines (one of the four)")
+        if outlines:
+            check_outlines_table(console, model, out)
+            return
+        if run is not None:
+            from persival.evaluate.anatomy_run import measure_run
+            from persival.evaluate.tables import to_rich
+
+            table = measure_run(run, model)
+            console.print(to_rich(table))
+            console.print(f"{table['notes'][0]}; wrote {run / 'anatomy'}/")
+            return
+        if store is not None:
+            with Progress(console=console, transient=True) as bar:
+                task = bar.add_task("anatomy of the store's states", total=None)
+                results = check_store(store, model, attachment,
+                                      progress=lambda done, total: bar.update(task, completed=done, total=total))
+        else:
+            results = check_state_dirs(states, model, attachment)
+        if not results:
+            raise ValueError(f"{store}: no finished states to measure")
+        print_tables(console, results)
+        if out is not None:
+            write_json(results, out, str(store) if store is not None else ", ".join(map(str, states)), attachment)
+            console.print(f"wrote {out}")
+
+
+def evaluate(
+    run: Path = typer.Option(Path("results"), "--run", help="Run folder written by `persival run --out`."),
+    bench: bool = typer.Option(True, "--bench/--no-bench", help="Also the speed table (persival bench nn)."),
+    peer: bool = typer.Option(True, "--peer/--no-peer", help="Time the Keras/TFLite peer if installed."),
+    max_draws: int = typer.Option(20000, "--max-draws", min=300, help="Cap of the 300-draw stopping rule."),
+    states: int = typer.Option(25, "--states", min=1, help="Held-out states of the error-propagation table."),
+) -> None:
+    """The paper's accuracy tables and figures on a run: RUN/evaluate/*.md, *.json, *.png."""
+    from rich.console import Console
+
+    from persival.campaign.store import StoreError
+    from persival.evaluate.run_layout import RunLayout
+    from persival.evaluate.stage import evaluate_run
+    from persival.evaluate.tables import to_rich
+
+    console = Console()
+    layout = RunLayout(run)
+    with user_errors(StoreError, out=layout.evaluate):
+        layout.check()
+        check_output_dir(layout.evaluate)
+        result = evaluate_run(run, progress=True, bench=bench, peer=peer, max_draws=max_draws, n_states=states,
+                              console=console)
+    from rich.markup import escape
+
+    from persival.evaluate.bench_nn import TERMINAL_COLUMNS
+
+    for name, table in result["tables"].items():
+        console.print(to_rich(table, TERMINAL_COLUMNS if name == "bench_nn" else None))
+    for name, why in result["skipped"].items():
+        console.print(f"[yellow]skipped {name}:[/yellow] {escape(str(why))}")
+    console.print(f"wrote {layout.evaluate}/ ({len(result['tables'])} tables, {len(result['figures'])} figures) "
+                  f"in {result['wall_time_s']:.0f} s; next: persival report --run {run}")
+
+
+def report(
+    ctx: typer.Context,
+    run: Path = typer.Option(Path("results"), "--run", help="Run folder with RUN/evaluate (persival evaluate)."),
+) -> None:
+    """One self-contained HTML page of a run (every table and figure, provenance): RUN/report/index.html."""
+    if ctx.invoked_subcommand is not None:
+        return
+    from rich.console import Console
+
+    from persival.evaluate.report import write_report
+
+    out = Path(run) / "report"
+    with user_errors(out=out):
+        if not Path(run).is_dir():
+            raise FileNotFoundError(f"--run {run}: no such run folder")
+        check_output_dir(out)
+        index = write_report(run)
+    Console().print(f"wrote {index} and {index.parent / 'results.json'}")
+
+
+def readme(
+    results: Path = typer.Option(Path("docs/results.json"), "--results",
+                                 help="A run's results.json (RUN/report/results.json; the committed copy: docs/results.json)."),
+    files: list[Path] = typer.Option(None, "--file", help="Markdown file with result blocks (<!-- results:NAME --> ... "
+                                     "<!-- /results:NAME -->); repeat it. Default: README.md and docs/benchmarks.md."),
+    check: bool = typer.Option(False, "--check", help="Write nothing; exit 1 when a block differs from its rendering."),
+) -> None:
+    """Rewrite the result blocks of README.md and docs/benchmarks.md from a run's results.json."""
+    from persival.evaluate.readme_tables import DEFAULT_FILES, load_results, rewrite_file
+
+    paths = [Path(f) for f in (files or DEFAULT_FILES)]
+    with user_errors():
+        data = load_results(results)
+        for path in paths:  # every file is checked before the first is written
+            rewrite_file(path, data, check=True)
+        statuses = {path: rewrite_file(path, data, check=check) for path in paths}
+    differ = False
+    for path, status in statuses.items():
+        for name, what in status.items():
+            shown = "differs" if check and what == "changed" else what
+            typer.echo(f"{path}: results:{name} {shown}" + (" (kept as written)" if what == "no numbers" else ""))
+            differ |= what == "changed"
+    if check and differ:
+        raise typer.Exit(1)
+
+
+def bench_nn(
+    run: Path = typer.Option(Path("results"), "--run", help="Run folder written by `persival run --out`."),
+    reps: int = typer.Option(1000, "--reps", min=10, help="Calls per row (after warm-up)."),
+    budget: float = typer.Option(4.0, "--budget", min=0.1, help="Seconds per row at most (then fewer calls)."),
+    peer: bool = typer.Option(True, "--peer/--no-peer", help="Time the Keras/TFLite peer if installed."),
+) -> None:
+    """Speed of every network variant, the deployed ONNX tiers and the SG: RUN/evaluate/bench_nn.*"""
+    from rich.console import Console
+
+    from persival.campaign.store import StoreError
+    from persival.evaluate.bench_nn import TERMINAL_COLUMNS
+    from persival.evaluate.run_layout import RunLayout
+    from persival.evaluate.stage import run_bench
+    from persival.evaluate.tables import to_rich
+
+    console = Console()
+    layout = RunLayout(run)
+    with user_errors(StoreError, out=layout.evaluate):
+        layout.check()
+        check_output_dir(layout.evaluate)
+        table = run_bench(run, progress=True, reps=reps, budget_s=budget, peer=peer, console=console)
+    console.print(to_rich(table, TERMINAL_COLUMNS))
+    for note in table["notes"]:
+        console.print(f"  {note}", markup=False)
+    console.print(f"wrote {layout.evaluate / 'bench_nn.md'} (every column) and {layout.evaluate / 'bench_nn.json'}")
+
+
+def _curve_tables(console, arm):
+    """The arm's response tables as a TableSolver when built (their levels run from 0 to 1), else None (sweeps)."""
+    from persival.tables.open import open_tables
+    from persival.tables.table_solve import TableSolver
+
+    try:
+        table = open_tables(arm)
+    except (FileNotFoundError, ValueError):
+        console.print("[dim]no response tables of this model: sweeping every muscle (minutes; "
+                      "`persival tables` makes this seconds)[/dim]")
+        return None
+    console.print(f"[dim]states from the response tables at {table.root}[/dim]")
+    return TableSolver(arm, table)

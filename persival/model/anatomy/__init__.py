@@ -1,0 +1,2 @@
+"""The anatomy: the model file's schema, bone shapes, outlines, fascial walls, imported and repaired
+surfaces, muscle solids and their fibres, and how deep one body lies in another (docs/arm_model.md)."""
