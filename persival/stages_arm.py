@@ -86,7 +86,7 @@ def tables(out: Path, config, console) -> dict:
 def fe(out: Path, config, console) -> dict:
     """Three FE states of the arm: from the response tables (exact path) when the run has them,
     else each continued from the hanging arm (from biceps 0.5 the jump to all flexors at 1 is a
-    snap-through of the slack brachioradialis: docs/arm_model.md)."""
+    snap-through of the slack brachioradialis: docs/design/arm_model_record.md)."""
     from persival.evaluate.render import render_states
     from persival.model.arm.arm_model import ArmModel
     from persival.model.arm.output import write_state

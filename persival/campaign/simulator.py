@@ -161,11 +161,6 @@ class SimulatorSpec:
     def to_json(self) -> str:
         return _canonical_json({"kind": self.kind, "options": self.options})
 
-    @classmethod
-    def from_json(cls, text: str) -> SimulatorSpec:
-        data = json.loads(text)
-        return cls(kind=data["kind"], options=data.get("options", {}))
-
     def digest(self) -> str:
         return hashlib.sha256(self.to_json().encode()).hexdigest()
 

@@ -1,4 +1,5 @@
-"""`persival anatomy`: overlap between bodies and bed gaps of solved arm states (docs/arm_model.md, "Overlap between bodies").
+"""`persival anatomy`: overlap between bodies and bed gaps of solved arm states
+(docs/design/arm_model_record.md, "Overlap between bodies").
 
 Reads the FE stage's state directories (one VTU per muscle and bone at its deformed position)
 or a campaign store of the FE arm (muscle surfaces per state; the bones are placed from the
@@ -25,7 +26,7 @@ from persival.vocabulary import MUSCLES
 __all__ = ["check_outlines_table", "check_state_dirs", "check_store", "pair_limit_mm", "print_tables", "worst_cases",
            "write_json", "MUSCLE_BONE_LIMIT_MM", "MUSCLE_MUSCLE_LIMIT_MM"]
 
-# docs/arm_model.md: in any state, penetration muscle-bone <= 1 mm and muscle-muscle <= 2 mm
+# docs/design/arm_model_record.md: in any state, penetration muscle-bone <= 1 mm and muscle-muscle <= 2 mm
 MUSCLE_BONE_LIMIT_MM = 1.0
 MUSCLE_MUSCLE_LIMIT_MM = 2.0
 

@@ -1,5 +1,5 @@
 """The anatomy of a run: bodies inside each other and muscles off their beds in the FE stage's
-states and the held-out campaign states (docs/arm_model.md, "Overlap between bodies"): every
+states and the held-out campaign states (docs/design/arm_model_record.md, "Overlap between bodies"): every
 state in ``OUT/anatomy/states.json``, and a table of the report (``anatomy.json``, ``anatomy.md``).
 
 One row per pair of bodies that overlap anywhere: its limit (1 mm muscle-bone, 2 mm muscle-muscle,
@@ -18,7 +18,7 @@ from persival.evaluate.tables import make_table, save_table
 
 __all__ = ["measure_run", "anatomy_table"]
 
-ATTACHMENT_MM = 10.0  # nodes this close to a muscle's ends are its attachments (docs/arm_model.md)
+ATTACHMENT_MM = 10.0  # nodes this close to a muscle's ends are its attachments (docs/design/arm_model_record.md)
 
 
 def _fe_state_dirs(out: Path) -> list[Path]:

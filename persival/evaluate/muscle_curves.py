@@ -99,7 +99,7 @@ REPORTED_SETS = {
 
 
 #: Physiological moment arms (mm, flexion positive) the model is calibrated against (after
-#: Murray et al. 1995, docs/arm_model.md): (muscle, angle range in deg, lowest, highest; None: no upper bound).
+#: Murray et al. 1995, docs/design/arm_model_record.md): (muscle, angle range in deg, lowest, highest; None: no upper bound).
 #: A range of None spans the joint's limits.
 MOMENT_ARM_BANDS_MM = (
     ("biceps", (85.0, 95.0), 35.0, 45.0),

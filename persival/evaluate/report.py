@@ -27,9 +27,9 @@ TABLE_ORDER = ("in_training", "random_activations", "random_angles", "error_prop
 _CSS = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1240px; padding: 0 1em; color: #222; }
 table { border-collapse: collapse; margin: 0.5em 0; font-size: 0.8em; }
-th, td { border: 1px solid #ccc; padding: 0.2em 0.4em; text-align: right; white-space: nowrap; }
-th { white-space: normal; min-width: 3.5em; vertical-align: bottom; }
-td:first-child { white-space: normal; min-width: 9em; }
+th, td { border: 1px solid #ccc; padding: 0.2em 0.4em; text-align: right; }
+th { min-width: 3.5em; vertical-align: bottom; }
+td:first-child { min-width: 7em; }
 th { background: #f0f0f0; } td:nth-child(-n+3) { text-align: left; }
 tr.paper td { background: #fff8e6; color: #555; font-style: italic; }
 .scroll { overflow-x: auto; } figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #ddd; }

@@ -207,11 +207,6 @@ class SparseGrid:
             t = cardinal_bspline(y, self.degree)
         return t.reshape(x.shape[0], self.dim * self._n_u)
 
-    def basis_matrix(self, x: Any, dtype: Any = np.float64) -> np.ndarray:
-        """B[k, j] = phi_j(x_k) = prod_t phi_{l_jt, i_jt}(x_kt), shape (m, N)."""
-        x = self._check_x(x)
-        return self._basis_chunked(x, _check_dtype(dtype))
-
     def _basis_chunked(self, x: np.ndarray, dtype: np.dtype) -> np.ndarray:
         step = max(1, _CHUNK_ENTRIES // self.n_points)
         if x.shape[0] <= step:

@@ -1,5 +1,5 @@
 """Bones with their shapes (persival.model.anatomy.bone_shapes): closed surfaces, sizes from the anatomy
-literature (docs/arm_model.md, "Bones"), the hinge through the trochlea and the capitulum, and the
+literature (docs/design/arm_model_record.md, "Bones"), the hinge through the trochlea and the capitulum, and the
 forearm bones turning about the humerus without entering it over the range the fossae take in."""
 
 from __future__ import annotations

@@ -372,7 +372,7 @@ def test_variant_biceps_lies_on_the_humerus_at_150_deg(capsys):
     """The shipped variant (persival/model/arm/variants/biceps_on_humerus.toml, coarse mesh): its fully
     active biceps, tied to the forearm and pressed on the humerus, at 150 deg stays outside the
     bone within the penalty's 0.5 mm, within SPEC 3.3's |J - 1| < 1 %, and still flexes (the
-    default's straight biceps passes 9.4 mm into the bone there: docs/arm_model.md)."""
+    default's straight biceps passes 9.4 mm into the bone there: docs/design/arm_model_record.md)."""
     from persival.model.arm.arm_model import ArmModel
     from persival.model.arm.defaults import default_model_path
 

@@ -2,7 +2,7 @@
 
 Each bone is a solid of :mod:`persival.model.anatomy.implicit_solids` built from a few parameters of
 the model file (``[bones.shape]``, defaults from the anatomy literature cited in
-docs/arm_model.md) and placed on the model's own bone lines and elbow hinge:
+docs/design/arm_model_record.md) and placed on the model's own bone lines and elbow hinge:
 
 * humerus: its shaft on the bone's line, widening at its distal end to the medial and lateral
   epicondyles; the trochlea and the capitulum one body of revolution about the hinge axis (the

@@ -1,7 +1,7 @@
 """Does the arm hold together? Overlap between bodies and the gap between a muscle and its bed.
 
 Every body (muscle or bone) is a closed triangle surface at its current position. Two measures
-(docs/arm_model.md, "Overlap between bodies"):
+(docs/design/arm_model_record.md, "Overlap between bodies"):
 
 * overlap, per ordered pair (A, B): the surface nodes of A that lie inside B and the deepest of
   them (its distance to B's surface). Inside/outside and depth come from one signed distance to

@@ -60,7 +60,7 @@ class Forearm(_Strict):
 
 
 class HumerusShape(_Strict):
-    """The humerus drawn and checked (persival.model.anatomy.bone_shapes; sources in docs/arm_model.md)."""
+    """The humerus drawn and checked (persival.model.anatomy.bone_shapes; sources in docs/design/arm_model_record.md)."""
 
     kind: Literal["humerus"] = "humerus"
     length: float = Field(315.0, gt=0, description="mm, trochlea to the top of the head")
@@ -162,7 +162,7 @@ class Contact(_Strict):
 
 class Outline(_Strict):
     """Where a muscle crosses the plane z = const of the upper-arm frame: an ellipse, as a
-    cross-sectional atlas of the arm draws it (docs/arm_model.md, "Muscles lofted through outlines")."""
+    cross-sectional atlas of the arm draws it (docs/design/arm_model_record.md, "Muscles lofted through outlines")."""
 
     z: float = Field(description="mm: height of the plane in the upper-arm frame (the hinge at 0)")
     centre: tuple[float, float] = Field(description="mm: x, y of the ellipse's centre in that plane")

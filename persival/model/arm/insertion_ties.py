@@ -8,7 +8,7 @@ insertion face with theta; the tie says how, and in which frame the unit is solv
   onto the current one; there the insertion face only translates along the mesh-pose line
   direction by ``L(theta) - L_mesh``, so a muscle without bones depends on L alone. A bone the
   muscle presses on makes its reaction turn with the line, though: the insertion face stays
-  square to O-I and the contact's push reaches the forearm as a shear (docs/arm_model.md).
+  square to O-I and the contact's push reaches the forearm as a shear (docs/design/arm_model_record.md).
 * :class:`ForearmTie`: the specification read literally, "insertion faces tied to the forearm (they move
   rigidly with theta)": the insertion face turns with the forearm about the hinge,
   ``x = c + R(theta - theta_mesh)(X - c)``, the origin face stays fixed to the humerus, and the

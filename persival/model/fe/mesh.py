@@ -133,9 +133,6 @@ class Tet10Mesh:
         cell_data = {name: [np.asarray(v)] for name, v in self.cell_data.items()}
         return meshio.Mesh(self.points, [("tetra10", self.cells)], point_data=data, cell_data=cell_data)
 
-    def write_vtu(self, path: str | Path, displacement: np.ndarray | None = None, point_data: dict | None = None):
-        self.to_meshio(displacement, point_data).write(str(path))
-
     @classmethod
     def read(cls, path: str | Path) -> Tet10Mesh:
         """Read any meshio format holding tetra10 cells."""

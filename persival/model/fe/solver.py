@@ -95,21 +95,6 @@ class NewtonStatistics:
     n_reused: int = 0  # Newton directions from an earlier factorization (options.reuse_factorization)
     wall_time: float = 0.0
 
-    def as_dict(self) -> dict:
-        return {
-            "load_steps": self.steps,
-            "step_cuts": self.step_cuts,
-            "iterations": self.iterations,
-            "iterations_per_step": [len(h) - 1 for h in self.residual_histories],
-            "time_assembly_s": self.time_assembly,
-            "time_factorization_s": self.time_factorization,
-            "time_solve_s": self.time_solve,
-            "assemblies": self.n_assemblies,
-            "factorizations": self.n_factorizations,
-            "reused_factorizations": self.n_reused,
-            "wall_time_s": self.wall_time,
-        }
-
 
 @dataclass
 class Reaction:
