@@ -46,8 +46,8 @@ def _build_small_run(root: Path) -> Path:
     from persival.campaign.simulator import SimulatorSpec
     from persival.deploy.export import export_model
     from persival.surrogate.activation_model import AngleActivationModel
+    from persival.surrogate.build import fit_sparse_grid, make_training_data, train_network
     from persival.surrogate.inverse import InverseProblem
-    from persival.surrogate.stage import fit_sparse_grid, make_training_data, train_network
     from persival.surrogate.training import TrainingConfig
 
     spec = SimulatorSpec("analytic", {})

@@ -15,7 +15,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "persival"
 STAGES = ("model.fe", "model.anatomy", "model.arm", "tables", "campaign", "surrogate", "deploy", "evaluate")
-TOP = {"persival.pipeline", "persival.stages", "persival.stages_arm"}  # the command line (persival.cli.*) too
+TOP = {"persival.pipeline", "persival.pipeline.stages", "persival.pipeline.arm_stages"}  # and the command line, persival.cli.*
 BOTTOM, ABOVE_ALL = -1, len(STAGES)
 # a lazily imported factory, e.g. "persival.campaign.analytic:AnalyticSimulator"
 LAZY_TARGET = re.compile(r"^(persival(?:\.\w+)+):\w+$")

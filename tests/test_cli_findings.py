@@ -23,7 +23,7 @@ def test_accuracy_of_an_all_muscle_sg(tmp_path):
     from persival.campaign.runner import INLINE, run_campaign
     from persival.campaign.simulator import SimulatorSpec
     from persival.cli import evaluate as commands
-    from persival.surrogate.stage import fit_sparse_grid
+    from persival.surrogate.build import fit_sparse_grid
 
     spec = SimulatorSpec("analytic", {"mesh_size": 20.0})
     run_campaign(tmp_path / "l1.zarr", Design.sparse_grid(1), spec, scheduler=INLINE, progress=False)
@@ -33,7 +33,7 @@ def test_accuracy_of_an_all_muscle_sg(tmp_path):
 
     app, bench = typer.Typer(), typer.Typer()
     app.add_typer(bench, name="bench")
-    commands.register(app, bench)
+    commands.register(app)
     res = CliRunner().invoke(app, ["accuracy", "--test", str(tmp_path / "held_out.zarr"),
                                    "--surrogate", f"sg={tmp_path / 'sg'}", "--out", str(tmp_path / "acc")])
     assert res.exit_code == 0, res.output
@@ -81,7 +81,7 @@ def test_bench_nn_table_is_readable_at_80_columns():
 
 
 def test_training_logs_count_epochs_per_fold(tmp_path):
-    from persival.stages import _train_progress
+    from persival.pipeline.stages import _train_progress
     from persival.surrogate.dataset import Dataset, Surfaces
     from persival.surrogate.training import TrainingConfig, train
 

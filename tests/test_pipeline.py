@@ -42,7 +42,7 @@ def test_the_viewer_screenshot_is_skipped_with_a_note_where_there_is_no_browser(
     from rich.console import Console
 
     import persival.deploy.bench_viewer as bench_viewer
-    from persival import stages
+    from persival.pipeline import stages
 
     def no_browser(*args, **kwargs):
         raise bench_viewer.ViewerBenchError("missing: Chromium at /usr/bin/chromium (apt-get install chromium)")
@@ -99,8 +99,8 @@ def test_a_user_error_half_way_keeps_the_stages_that_finished(tmp_path, monkeypa
     from typer.testing import CliRunner
 
     import persival.pipeline as pipeline
-    from persival import stages
     from persival.cli import app
+    from persival.pipeline import stages
 
     monkeypatch.setattr(pipeline, "STAGES", [s for s in pipeline.STAGES if s[0] in ("model", "tables")])
 
@@ -126,7 +126,7 @@ def test_an_edited_model_file_or_a_new_physics_version_reruns_every_stage_from_t
     import persival
     import persival.model.arm.defaults as defaults
     import persival.model.arm.model_file as arm_file
-    from persival import stages
+    from persival.pipeline import stages
 
     model = tmp_path / "default_arm.toml"
     model.write_text(defaults.default_model_path().read_text())

@@ -33,6 +33,7 @@ def main(
 
 def _register() -> None:
     # Imported here so that `persival --help` stays fast and each stage stays independent.
+    from persival.cli import bench as bench_commands
     from persival.cli import campaign as campaign_commands
     from persival.cli import deploy as deploy_commands
     from persival.cli import evaluate as evaluate_commands
@@ -43,11 +44,12 @@ def _register() -> None:
 
     run_command.register(app)
     model_commands.register(app)
-    campaign_commands.register(app, bench_app)
+    campaign_commands.register(app)
     tables_commands.register(app)
-    motion_app = surrogate_commands.register(app, bench_app)
-    evaluate_commands.register(app, bench_app)
-    deploy_commands.register(app, bench_app, motion_app)
+    motion_app = surrogate_commands.register(app)
+    evaluate_commands.register(app)
+    deploy_commands.register(app, motion_app)
+    bench_commands.register(bench_app)
 
 
 _register()

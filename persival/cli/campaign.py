@@ -15,8 +15,8 @@ _SIMULATOR_HELP = ("Simulator kind: arm (the built-in FE model), analytic (close
                    "or external.")
 
 
-def register(app: typer.Typer, bench_app: typer.Typer) -> None:
-    """Attach this stage's commands to the main app (``bench_app``: no benchmark here)."""
+def register(app: typer.Typer) -> None:
+    """Attach this stage's commands to the main app."""
     campaign_app = typer.Typer(
         cls=FullHelpGroup, help="Simulation campaigns: run a simulator over a design into a store.", no_args_is_help=True)
     app.add_typer(campaign_app, name="campaign")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import ipaddress
-import json
 from pathlib import Path
 
 import typer
@@ -102,95 +101,11 @@ def play(
     typer.echo(f"wrote {', '.join(str(f) for f in files)}")
 
 
-def register(app: typer.Typer, bench_app: typer.Typer, motion_app: typer.Typer | None = None) -> None:
-    """Attach `export` and `serve` to the main app, `serve` and `viewer` to the benchmark group and
-    `play` to the `motion` group."""
+def register(app: typer.Typer, motion_app: typer.Typer | None = None) -> None:
+    """Attach `export` and `serve` to the main app and `play` to the `motion` group."""
     app.command("export")(export)
     app.command("serve")(serve)
     if motion_app is not None:
         motion_app.command("play")(play)
-    bench_app.command("viewer")(bench_viewer)
-    bench_app.command("serve")(bench_serve)
 
 
-def bench_serve(
-    artifacts: Path = typer.Option(..., "--artifacts", help="Export folder to serve."),
-    clients: int = typer.Option(8, "--clients", min=1, max=64, help="Concurrent WebSocket clients."),
-    rate: float = typer.Option(60.0, "--rate", min=1, max=240, help="States per second per client."),
-    duration: float = typer.Option(10.0, "--duration", min=1, max=120, help="Seconds of load."),
-    bad_every: int = typer.Option(25, "--bad-every", min=0, help="Every k-th request is malformed (0: none)."),
-    encoding: str = typer.Option("binary", "--encoding", help="Reply encoding: binary (the viewer's) or json."),
-    json_out: Path = typer.Option(None, "--json", help="Also write the figures to this file."),
-) -> None:
-    """Load-test the server on loopback: N WebSocket clients at M states/s; latency, throughput, errors."""
-    import json
-
-    from rich.console import Console
-    from rich.table import Table
-
-    from persival.cli.errors import user_errors
-    from persival.deploy.artifacts import ArtifactError
-    from persival.deploy.bench_serve import LoadTestError, run_load_test
-
-    console = Console()
-    with user_errors(ArtifactError, LoadTestError):
-        summary = run_load_test(artifacts, clients, rate, duration, bad_every, encoding).summary()
-    table = Table(title=f"persival serve: {clients} clients x {rate:g} states/s, {duration:g} s, {encoding}")
-    table.add_column("what")
-    table.add_column("value", justify="right")
-    for key in ("offered_per_s", "states", "states_per_s", "p50_ms", "p99_ms", "max_ms", "bad_sent", "bad_refused",
-                "errors", "server_peak_rss_mb"):
-        value = summary[key]
-        table.add_row(key, f"{value:.3g}" if isinstance(value, float) else str(value))
-    console.print(table)
-    for line in summary["first_errors"]:
-        console.print(f"[red]{line}[/red]")
-    if json_out:
-        json_out.write_text(json.dumps(summary, indent=2))
-    if summary["errors"]:
-        raise typer.Exit(1)
-
-
-def bench_viewer(
-    artifacts: Path = typer.Option(Path("results/export"), "--artifacts", help="Export folder to view."),
-    seconds: float = typer.Option(8.0, "--seconds", min=1.0, max=60.0, help="Measured seconds per phase."),
-    width: int = typer.Option(1280, "--width", min=320, max=3840, help="Window width, px."),
-    height: int = typer.Option(800, "--height", min=240, max=2160, help="Window height, px."),
-    trace: bool = typer.Option(True, "--trace/--no-trace", help="Record a Chrome trace of the shipped phase."),
-    json_out: Path = typer.Option(None, "--json", help="Also write the result to this file."),
-    screenshot: Path = typer.Option(None, "--screenshot", help="Also save the default view as a PNG (the report "
-                                    "shows RUN/evaluate/viewer.png)."),
-) -> None:
-    """Frame rate of the web viewer in headless Chromium (software GL) while the arm moves every
-    frame, with the frame's profile (the page's own timings and a Chrome trace per thread)."""
-    from rich.console import Console
-    from rich.table import Table
-
-    from persival.cli.errors import check_output_file, user_errors
-    from persival.deploy.artifacts import ArtifactError
-    from persival.deploy.bench_viewer import ViewerBenchError, run_viewer_bench
-
-    with user_errors(ArtifactError, ViewerBenchError):
-        for path, what in ((json_out, "--json"), (screenshot, "--screenshot")):
-            if path is not None:
-                check_output_file(path, what)
-        result = run_viewer_bench(artifacts, seconds, width, height, trace, screenshot=screenshot)
-    console = Console()
-    table = Table(title=f"viewer, headless Chromium {result.get('chromium', '')}, software GL, {width} x {height}, "
-                        f"{result['export']['n_nodes']} nodes; load average {result['machine']['load_average'][0]:.1f}")
-    for col in ("phase", "fps", "CPU ms / frame", "render scale", "JS ms / state", "JS ms / frame"):
-        table.add_column(col, justify="left" if col == "phase" else "right")
-    for p in result["phases"]:
-        js_state = sum(p["perState"].values())
-        table.add_row(p["phase"], f"{p['fps']:.1f}", f"{p['cpuMsPerFrame']:.1f}", f"{p['renderScale']:.2f}",
-                      f"{js_state:.2f}", f"{p['perFrame']['tickMs']:.2f}")
-    console.print(table)
-    for t in result["phases"][0].get("trace", []):
-        top = "; ".join(f"{e['name']} {e['msPerFrame']:.2f}" for e in t["top"][:3])
-        console.print(f"  {t['thread']}: busy {t['busyMsPerFrame']:.2f} ms/frame ({top})", markup=False)
-    if json_out is not None:
-        json_out.parent.mkdir(parents=True, exist_ok=True)
-        json_out.write_text(json.dumps(result, indent=1))
-        console.print(f"wrote {json_out}")
-    if screenshot is not None:
-        console.print(f"wrote {screenshot}")

@@ -12,8 +12,8 @@ from persival.cli.values import parse_numbers
 from persival.model.arm.defaults import profiles_help
 
 
-def register(app: typer.Typer, bench_app: typer.Typer) -> None:
-    """Attach this stage's commands to the main app and the benchmark group."""
+def register(app: typer.Typer) -> None:
+    """Attach this stage's commands to the main app (its benchmarks: persival.cli.bench)."""
     for command in (render, sections, curves, accuracy, anatomy, evaluate):
         app.command()(command)
     # `persival report --run RUN` writes the report; `persival report readme` copies its numbers into the docs
@@ -23,11 +23,6 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     app.add_typer(report_app, name="report")
     report_app.callback(invoke_without_command=True)(report)
     report_app.command("readme")(readme)
-    bench_app.command("fe")(bench_fe)
-    bench_app.command("arm")(bench_arm)
-    bench_app.command("deployed")(bench_deployed)
-    bench_app.command("sg")(bench_sg)
-    bench_app.command("nn")(bench_nn)
 
 
 def render(
@@ -166,89 +161,6 @@ def accuracy(
     console.print(f"wrote {out / 'accuracy.json'} and {plot_accuracy(report, out / 'accuracy.png')}")
 
 
-def bench_fe(
-    mesh_size: float = typer.Option(6.3, min=1.0, help="Element size of the 40 x 300 mm spindle (mm)."),
-    activation: float = typer.Option(1.0, min=0.0, max=1.0, help="Activation of the benchmark state."),
-    repeats: int = typer.Option(5, min=1, help="Repetitions per timing (best is kept)."),
-    backend: str = typer.Option("auto", help="Sparse solver: auto, pardiso or scipy."),
-) -> None:
-    """Newton iteration vs sparse factorization on the paper-size spindle (target ratio <= 1.5)."""
-    from persival.evaluate.bench_fe import print_fe_benchmark, run_fe_benchmark
-    from persival.model.fe.linear_solver import SparseSymmetricSolver
-
-    with user_errors(RuntimeError):  # RuntimeError: pardiso asked for but not installed
-        SparseSymmetricSolver(backend)  # an unknown backend fails here, before the meshing
-        result = run_fe_benchmark(mesh_size, activation, repeats, backend)
-    print_fe_benchmark(result)
-
-
-def bench_arm(
-    profile: str = typer.Option("quick", "--profile", help="Mesh profile of the built-in arm."),
-    states: int = typer.Option(10, "--states", min=1, help="Random activation vectors for the per-state timings."),
-    direct: int = typer.Option(0, "--direct", min=0, help="Of those, also solve this many by the direct coupled solve "
-                               "(minutes each) and compare."),
-    campaign_level: int = typer.Option(2, "--campaign-level", min=0, max=3,
-                                       help="Run a sparse-grid campaign of this level through the runner (0: none)."),
-    out: Path | None = typer.Option(None, "--out", help="Also write the figures as JSON here."),
-) -> None:
-    """The FE arm at campaign scale: response tables, exact and table-only states, a campaign."""
-    import json
-
-    from rich.console import Console
-
-    from persival.evaluate.bench_arm import print_arm_benchmark, run_arm_benchmark
-    from persival.model.arm.model_file import load_model_file
-
-    with user_errors():
-        load_model_file()[0].profile(profile)
-        if out is not None:
-            check_output_file(out)
-    console = Console()
-    with console.status("FE arm benchmark") as status:
-        result = run_arm_benchmark(profile, states, min(direct, states), campaign_level,
-                                   progress=lambda text: status.update(f"FE arm benchmark: {text}"))
-    print_arm_benchmark(result)
-    if out is not None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(result, indent=1, default=float))
-        console.print(f"wrote {out}")
-
-
-def bench_deployed(
-    run: Path = typer.Option(Path("results"), "--run", help="Run folder (persival run --out) of the FE arm."),
-    states: int = typer.Option(200, "--states", min=1, help="Random activation vectors solved by the exact FE path."),
-    seed: int = typer.Option(11, "--seed", help="Seed of the random activations (another than the run's held-out)."),
-) -> None:
-    """Every surrogate of a run against N more exact FE states (a resumable store under RUN/bench/)."""
-    import json
-
-    from persival.evaluate.bench_deployed import print_deployed_benchmark, run_deployed_benchmark
-
-    with user_errors():
-        result = run_deployed_benchmark(run, states, seed)
-    markdown = print_deployed_benchmark(result)
-    folder = Path(run) / "bench"
-    (folder / "deployed.json").write_text(json.dumps(result, indent=1, default=float))
-    (folder / "deployed.md").write_text(markdown)
-    typer.echo(f"wrote {folder / 'deployed.json'} and {folder / 'deployed.md'}")
-
-
-def bench_sg(
-    dim: int = typer.Option(5, min=1, help="Input dimension (activations)."),
-    level: int = typer.Option(2, min=1, help="Regular sparse-grid level."),
-    degree: int = typer.Option(3, min=1, help="Odd B-spline degree."),
-    n_out: int = typer.Option(2809 * 3 + 1, min=1, help="Outputs per state (surface xyz + angle)."),
-    batch: int = typer.Option(1000, min=1, help="Large batch size."),
-    reps: int = typer.Option(300, min=1, help="Repetitions at batch 1 (after warmup)."),
-) -> None:
-    """Seconds per whole-surface state of the sparse-grid surrogate, batch 1 and large batch."""
-    from persival.evaluate.bench_sparse_grid import print_benchmark, run_benchmark
-
-    with user_errors():
-        result = run_benchmark(dim=dim, level=level, degree=degree, n_out=n_out, batch=batch, reps_single=reps)
-    print_benchmark(result)
-
-
 def anatomy(
     states: list[Path] = typer.Argument(None, help="State directories written by the FE stage or `persival simulate`."),
     store: Path | None = typer.Option(None, "--store", help="Campaign store of the FE arm (instead of state directories)."),
@@ -312,8 +224,8 @@ def evaluate(
     from rich.console import Console
 
     from persival.campaign.store import StoreError
+    from persival.evaluate.evaluation import evaluate_run
     from persival.evaluate.run_layout import RunLayout
-    from persival.evaluate.stage import evaluate_run
     from persival.evaluate.tables import to_rich
 
     console = Console()
@@ -379,33 +291,6 @@ def readme(
             differ |= what == "changed"
     if check and differ:
         raise typer.Exit(1)
-
-
-def bench_nn(
-    run: Path = typer.Option(Path("results"), "--run", help="Run folder written by `persival run --out`."),
-    reps: int = typer.Option(1000, "--reps", min=10, help="Calls per row (after warm-up)."),
-    budget: float = typer.Option(4.0, "--budget", min=0.1, help="Seconds per row at most (then fewer calls)."),
-    peer: bool = typer.Option(True, "--peer/--no-peer", help="Time the Keras/TFLite peer if installed."),
-) -> None:
-    """Speed of every network variant, the deployed ONNX tiers and the SG: RUN/evaluate/bench_nn.*"""
-    from rich.console import Console
-
-    from persival.campaign.store import StoreError
-    from persival.evaluate.bench_nn import TERMINAL_COLUMNS
-    from persival.evaluate.run_layout import RunLayout
-    from persival.evaluate.stage import run_bench
-    from persival.evaluate.tables import to_rich
-
-    console = Console()
-    layout = RunLayout(run)
-    with user_errors(StoreError, out=layout.evaluate):
-        layout.check()
-        check_output_dir(layout.evaluate)
-        table = run_bench(run, progress=True, reps=reps, budget_s=budget, peer=peer, console=console)
-    console.print(to_rich(table, TERMINAL_COLUMNS))
-    for note in table["notes"]:
-        console.print(f"  {note}", markup=False)
-    console.print(f"wrote {layout.evaluate / 'bench_nn.md'} (every column) and {layout.evaluate / 'bench_nn.json'}")
 
 
 def _curve_tables(console, arm):

@@ -11,8 +11,8 @@ from persival.cli.help import FullHelpGroup
 from persival.cli.values import parse_numbers
 
 
-def register(app: typer.Typer, bench_app: typer.Typer) -> typer.Typer:
-    """Attach this stage's commands to the main app and the benchmark group; returns the `motion`
+def register(app: typer.Typer) -> typer.Typer:
+    """Attach this stage's commands to the main app; returns the `motion`
     group (later stages add subcommands to it): `persival motion --table ...` builds the model,
     its subcommands (`motion play`, from the deploy stage) use an export."""
     surrogate_app = typer.Typer(cls=FullHelpGroup, help="Surrogates fitted to campaign stores.", no_args_is_help=True)
@@ -46,7 +46,7 @@ def fit_sg(
     console = Console()
     with user_errors(StoreError, out=out):
         check_output_dir(out)
-        from persival.surrogate.stage import parse_muscles
+        from persival.surrogate.build import parse_muscles
 
         surrogate = SparseGridSurrogate(parse_muscles(muscle), degree).fit(store)
         surrogate.save(out)
@@ -70,7 +70,7 @@ def fit_structured_command(
     from rich.console import Console
 
     from persival.campaign.store import StoreError
-    from persival.surrogate.stage import fit_structured
+    from persival.surrogate.build import fit_structured
 
     console = Console()
     if frame not in ("world", "own"):
@@ -173,7 +173,7 @@ def inverse(
     from rich.console import Console
     from rich.table import Table
 
-    from persival.surrogate.stage import build_activation_model, solve_inverse
+    from persival.surrogate.build import build_activation_model, solve_inverse
     from persival.vocabulary import ABBREVIATIONS
 
     with user_errors(out=out):
@@ -213,7 +213,7 @@ def data(
     seed: int = typer.Option(0, "--seed", help="Random seed (same seed, same data)."),
 ) -> None:
     """SG training data for the networks: states at alpha_opt(Theta) and at random activations."""
-    from persival.surrogate.stage import make_training_data
+    from persival.surrogate.build import make_training_data
 
     with user_errors(out=out):
         check_output_dir(out)
@@ -237,7 +237,7 @@ def train(
     device: str = typer.Option("auto", "--device", help="auto (CUDA when present, else CPU), cpu or cuda."),
 ) -> None:
     """Train the paper network or the POD network (k-fold CV, best by validation loss)."""
-    from persival.surrogate.stage import parse_muscles, train_network
+    from persival.surrogate.build import parse_muscles, train_network
     from persival.surrogate.training import TrainingConfig
 
     with user_errors(out=out):

@@ -1,6 +1,6 @@
 """`persival report`: one self-contained HTML page of a run, and ``results.json`` with every table.
 
-``write_report(out)`` reads ``OUT/evaluate/`` (the tables of :func:`persival.evaluate.stage.evaluate_run`
+``write_report(out)`` reads ``OUT/evaluate/`` (the tables of :func:`persival.evaluate.evaluation.evaluate_run`
 and its figures) plus every other figure of the run, and writes ``OUT/report/index.html`` (figures
 embedded as base64 PNG, no script, no external file) and ``OUT/report/results.json``. Each number
 carries its provenance: the command and inputs of its table, the training and SG configuration,
@@ -158,7 +158,7 @@ def _page(out: Path, tables: dict, figures: list, provenance: dict, configs: dic
 
 def write_report(out: str | Path, command: str | None = None) -> Path:
     """``OUT/report/index.html`` and ``OUT/report/results.json``; returns the HTML's path."""
-    from persival.evaluate.stage import default_command, deployed_summary, environment
+    from persival.evaluate.evaluation import default_command, deployed_summary, environment
 
     out = Path(out)
     folder = out / "evaluate"

@@ -47,7 +47,7 @@ def _cli() -> typer.Typer:
     app = typer.Typer()
     bench = typer.Typer()
     app.add_typer(bench, name="bench")
-    commands.register(app, bench)
+    commands.register(app)
     return app
 
 

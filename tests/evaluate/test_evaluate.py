@@ -38,7 +38,7 @@ def tiny_run(small_run, tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def evaluated(tiny_run) -> dict:
-    from persival.evaluate.stage import evaluate_run, run_bench
+    from persival.evaluate.evaluation import evaluate_run, run_bench
 
     if "evaluated" not in _SESSION:
         t0 = time.perf_counter()

@@ -2,8 +2,9 @@
 
 Reuses the session's tiny run of tests/evaluate/test_evaluate.py. The browser check (Debian's
 /usr/bin/chromium through playwright-core from the web viewer's node_modules) loads the page
-from disk at 1280 px, counts tables and decoded images, checks that no table is wider than its box, records console errors and takes a full-page
-screenshot ($PERSIVAL_REPORT_SHOTS or the test's tmp folder).
+from disk at 1280 px, counts tables and decoded images, checks that no table is wider than its
+box, records console errors and takes a full-page screenshot ($PERSIVAL_REPORT_SHOTS or the
+test's tmp folder).
 """
 
 from __future__ import annotations

@@ -252,9 +252,8 @@ def test_the_run_fits_the_deployed_model_to_its_own_model_file(monkeypatch, tmp_
     built-in arm's and refused the campaign's states as another model's)."""
     from rich.console import Console
 
-    import persival.surrogate.stage as stage
-    from persival import stages
-    from persival.pipeline import RunConfig
+    import persival.surrogate.build as stage
+    from persival.pipeline import RunConfig, stages
 
     seen = {}
 

@@ -108,7 +108,7 @@ def test_accuracy_command_writes_table_and_figure(campaigns, tmp_path):
 
     app, bench = typer.Typer(), typer.Typer()
     app.add_typer(bench, name="bench")
-    commands.register(app, bench)
+    commands.register(app)
     runner = CliRunner()
     res = runner.invoke(app, ["accuracy", "--test", str(campaigns / "test.zarr"),
                               "--surrogate", f"regular={campaigns / 'regular'}", "--out", str(tmp_path)])
@@ -159,7 +159,7 @@ def test_adapt_command_stops_on_tolerance_and_rejects_bad_input(tmp_path):
 
     app, bench = typer.Typer(), typer.Typer()
     app.add_typer(bench, name="bench")
-    commands.register(app, bench)
+    commands.register(app)
     runner = CliRunner()
     args = ["surrogate", "adapt", "--out", str(tmp_path / "ad"), "--max-points", "243", "--simulator", "analytic",
             "--option", "mesh_size=14", "--no-progress"]

@@ -62,7 +62,7 @@ def test_activation_model_reproduces_the_solver_and_its_onnx(problem, small_run,
 
 
 def test_training_data_mixes_both_kinds_and_is_reproducible(small_run, tmp_path):
-    from persival.surrogate.stage import make_training_data
+    from persival.surrogate.build import make_training_data
     from persival.surrogate.training_data import open_dataset
 
     data = open_dataset(small_run / "data")

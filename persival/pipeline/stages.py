@@ -1,6 +1,6 @@
 """The stages of `persival run` (persival.pipeline sequences them): each reads the artifacts of
 the stages before it from OUT and writes its own folder, through the stages' Python API. The FE
-arm's stages (model, tables, fe, campaign, anatomy) are in persival.stages_arm; here the
+arm's stages (model, tables, fe, campaign, anatomy) are in persival.pipeline.arm_stages; here the
 surrogates', deployment's and evaluation's, and the registry.
 
 Each runner is ``fn(out, config, console) -> summary (json-able)``; ``SETTINGS[name]`` lists the
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.stages_arm import anatomy, campaign, fe, model, tables
+from persival.pipeline.arm_stages import anatomy, campaign, fe, model, tables
 
 __all__ = ["RUNNERS", "SETTINGS", "print_results"]
 
@@ -25,8 +25,8 @@ def structured(out: Path, config, console) -> dict:
         why = "the structured surrogate is fitted to the FE arm's response tables (the campaign ran the analytic stand-in)"
         console.print(f"  [yellow]skipped[/yellow]: {why}")
         return {"skipped": why}
+    from persival.surrogate.build import fit_structured
     from persival.surrogate.dataset import Dataset
-    from persival.surrogate.stage import fit_structured
 
     surrogate = fit_structured(out / "campaign" / "held_out.zarr", out / "structured", config.profile,
                                 config.model)
@@ -45,7 +45,7 @@ def structured(out: Path, config, console) -> dict:
 
 
 def sg(out: Path, config, console) -> dict:
-    from persival.surrogate.stage import fit_sparse_grid
+    from persival.surrogate.build import fit_sparse_grid
 
     surrogate = fit_sparse_grid(out / "campaign" / "campaign.zarr", out / "sg", muscles=None)
     console.print(f"  level {surrogate.metadata['level']}: {surrogate.grid.n_points} points, {surrogate.n_nodes} surface "
@@ -54,7 +54,7 @@ def sg(out: Path, config, console) -> dict:
 
 
 def inverse(out: Path, config, console) -> dict:
-    from persival.surrogate.stage import build_activation_model, solve_inverse
+    from persival.surrogate.build import build_activation_model, solve_inverse
 
     t0 = time.perf_counter()
     model = build_activation_model(out / "sg", out / "inverse" / "activation_model.json")
@@ -112,7 +112,7 @@ def motion(out: Path, config, console) -> dict:
 
 
 def data(out: Path, config, console) -> dict:
-    from persival.surrogate.stage import make_training_data
+    from persival.surrogate.build import make_training_data
 
     make_training_data(out / "sg", out / "inverse" / "activation_model.json", out / "data", config.samples,
                        config.angle_fraction, config.seed)
@@ -132,7 +132,7 @@ def _train_progress(console, label: str):
 
 
 def train(out: Path, config, console) -> dict:
-    from persival.surrogate.stage import train_network
+    from persival.surrogate.build import train_network
     from persival.surrogate.training import TrainingConfig
 
     summary = {}
@@ -214,7 +214,7 @@ def _contract_check(folder: Path, console) -> dict:
 
 
 def evaluate(out: Path, config, console) -> dict:
-    from persival.evaluate.stage import evaluate_run
+    from persival.evaluate.evaluation import evaluate_run
 
     result = evaluate_run(out, progress=True, console=console, n_states=config.held_out, bench=config.bench)
     if config.bench:

@@ -1,5 +1,5 @@
 """The stages of `persival run` that compute the FE arm: model -> tables -> fe -> campaign ->
-anatomy (persival.stages holds the rest and the registry). Each runner is
+anatomy (persival.pipeline.stages holds the rest and the registry). Each runner is
 ``fn(out, config, console) -> summary (json-able)``, reading the artifacts of the stages before it
 from OUT and writing its own folder through the stages' Python API.
 """

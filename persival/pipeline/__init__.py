@@ -33,7 +33,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from persival import stages
+from persival.pipeline import stages
 
 __all__ = ["RunConfig", "run", "STAGES"]
 
