@@ -38,6 +38,7 @@ def _register() -> None:
     from persival.cli import deploy as deploy_commands
     from persival.cli import evaluate as evaluate_commands
     from persival.cli import model as model_commands
+    from persival.cli import motion as motion_commands
     from persival.cli import run as run_command
     from persival.cli import surrogate as surrogate_commands
     from persival.cli import tables as tables_commands
@@ -46,9 +47,10 @@ def _register() -> None:
     model_commands.register(app)
     campaign_commands.register(app)
     tables_commands.register(app)
-    motion_app = surrogate_commands.register(app)
+    surrogate_commands.register(app)
+    motion_commands.register(app)
     evaluate_commands.register(app)
-    deploy_commands.register(app, motion_app)
+    deploy_commands.register(app)
     bench_commands.register(bench_app)
 
 

@@ -68,44 +68,9 @@ def export(
     typer.echo(f"wrote {out}/metadata.json ({meta['n_nodes']} nodes); serve it: persival serve --artifacts {out}")
 
 
-def play(
-    input_: Path = typer.Option(..., "--input", help="Recorded movement: CSV (time s, elbow angle deg, optional "
-                                "load kg) or OpenSim .mot / .sto."),
-    out: Path = typer.Option(..., "--out", help="Output folder: activations.csv, motion.png, summary.json."),
-    column: str = typer.Option(None, "--column", help="The elbow-angle column (default: found by name, e.g. "
-                               "r_elbow_flex, elbow_flex_r, elbow_angle_deg)."),
-    load: float = typer.Option(None, "--load", min=0.0, help="Load in the hand, kg, for every frame (default: the "
-                               "file's load column, else 0)."),
-    artifacts: Path = typer.Option(Path("results/export"), "--artifacts", help="Export folder (persival export)."),
-) -> None:
-    """Play a recorded elbow movement through the exported models: activations per frame, target vs
-    achieved angle, frames clamped to the reachable range and frames whose load cannot be held."""
-    from persival.cli.errors import check_output_dir, user_errors
-    from persival.deploy.artifacts import ArtifactError, DeployedModel
-    from persival.deploy.motion_play import play_recording, write_outputs
-    from persival.deploy.recording import read_recording
-
-    with user_errors(ArtifactError, out=out):
-        recording = read_recording(input_, column)
-        check_output_dir(out)
-        model = DeployedModel(artifacts)
-        frames, summary = play_recording(model, recording, load)
-        files = write_outputs(out, frames, summary, model.muscles)
-    peak = ", ".join(f"{m} {v:.2f}" for m, v in summary["peak_activations"].items())
-    typer.echo(f"{summary['frames']} frames over {summary['duration_s']:.2f} s ({recording.column}, "
-               f"{summary['input_frames']} in the file); {summary['frames_clamped']} clamped to "
-               f"{summary['range_deg'][0]:.1f}-{summary['range_deg'][1]:.1f} deg; {summary['frames_not_holdable']} "
-               f"where the muscles cannot hold the load")
-    typer.echo(f"achieved vs target angle: max {summary['angle_error_deg']['max']:.2f} deg, mean "
-               f"{summary['angle_error_deg']['mean']:.2f} deg; peak activations: {peak}")
-    typer.echo(f"wrote {', '.join(str(f) for f in files)}")
-
-
-def register(app: typer.Typer, motion_app: typer.Typer | None = None) -> None:
-    """Attach `export` and `serve` to the main app and `play` to the `motion` group."""
+def register(app: typer.Typer) -> None:
+    """Attach `export` and `serve` to the main app."""
     app.command("export")(export)
     app.command("serve")(serve)
-    if motion_app is not None:
-        motion_app.command("play")(play)
 
 

@@ -11,10 +11,8 @@ from persival.cli.help import FullHelpGroup
 from persival.cli.values import parse_numbers
 
 
-def register(app: typer.Typer) -> typer.Typer:
-    """Attach this stage's commands to the main app; returns the `motion`
-    group (later stages add subcommands to it): `persival motion --table ...` builds the model,
-    its subcommands (`motion play`, from the deploy stage) use an export."""
+def register(app: typer.Typer) -> None:
+    """Attach this stage's commands to the main app (the motion model's: persival.cli.motion)."""
     surrogate_app = typer.Typer(cls=FullHelpGroup, help="Surrogates fitted to campaign stores.", no_args_is_help=True)
     app.add_typer(surrogate_app, name="surrogate")
     surrogate_app.command("fit-sg")(fit_sg)
@@ -23,11 +21,6 @@ def register(app: typer.Typer) -> typer.Typer:
     app.command("inverse")(inverse)
     app.command("data")(data)
     app.command("train")(train)
-    motion_app = typer.Typer(cls=FullHelpGroup, help="The motion-and-load activation model (docs/theory.md 6.4): build it from a "
-                             "moment table (options below), or play a recorded movement (motion play).")
-    app.add_typer(motion_app, name="motion")
-    motion_app.callback(invoke_without_command=True)(motion)
-    return motion_app
 
 
 def fit_sg(
@@ -255,65 +248,3 @@ def train(
                f"{surrogate.metadata['parameters']} parameters; wrote {out} (history.png)")
 
 
-def _loads(text: str) -> list[float]:
-    return parse_numbers(text, "--loads", "kg", minimum=0.0)
-
-
-def motion(
-    ctx: typer.Context,
-    table: Path = typer.Option(None, "--table", help="Moment table (persival moments --out)."),
-    out: Path = typer.Option(None, "--out", help="Output folder: motion_model.json/.npz, motion_model.png, "
-                             "activation_motion.onnx."),
-    model: Path = typer.Option(None, "--model", help="Model file the table must belong to; default: the built-in arm."),
-    angles: str = typer.Option("30,60,90,120", "--angles", help="Elbow angles (deg) of the printed table."),
-    loads: str = typer.Option("0,1,2,5", "--loads", help="Hand loads (kg) of the printed table."),
-) -> None:
-    """The motion-and-load activation model from a moment table: build, plot, ONNX."""
-    if ctx.invoked_subcommand is not None:
-        return
-    if table is None or out is None:
-        fail("persival motion needs --table and --out (build the model), or a subcommand: motion play --input FILE")
-    _build_motion(table, out, model, angles, loads)
-
-
-def _build_motion(table: Path, out: Path, model: Path | None, angles: str, loads: str) -> None:
-    import numpy as np
-    from rich.console import Console
-
-    from persival.model.arm.model_file import load_model_file
-    from persival.surrogate.motion_model import MotionActivationModel, plot_motion_model
-    from persival.tables.moment_table import MomentTable
-
-    with user_errors(out=out):
-        targets, masses = _angles(angles), _loads(loads)
-        if not np.isfinite(targets).all():
-            raise ValueError(f"--angles must be finite, got {angles!r}")
-        check_output_dir(out)
-        spec, model_hash = load_model_file(model)
-        model_ = MotionActivationModel.from_table(MomentTable.load(table, model_hash, complete=True), spec)
-        rows = np.array([[t, 0.0, 0.0, m] for t in targets for m in masses])
-        activations, feasible = model_.predict(rows)  # angles outside the range: a user error
-        out.mkdir(parents=True, exist_ok=True)
-        model_.save(out)
-        entry = model_.export_onnx(out)
-        plot = plot_motion_model(model_, out / "motion_model.png")
-    _print_motion(Console(), model_, rows, activations, feasible, entry, plot)
-
-
-def _print_motion(console, model, rows, activations, feasible, entry, plot) -> None:
-    import numpy as np
-    from rich.table import Table
-
-    from persival.vocabulary import ABBREVIATIONS
-
-    t = Table(title=f"least-effort activations, zero velocity and acceleration (range {model.range_deg[0]:.0f}-"
-              f"{model.range_deg[1]:.0f} deg)")
-    for col in ["angle", "load kg", "M_req N mm", *ABBREVIATIONS, "holds"]:
-        t.add_column(col, justify="right")
-    for r, a, ok, req in zip(rows, activations, feasible, model.required_moment(rows)):
-        t.add_row(f"{r[0]:g}", f"{r[3]:g}", f"{req:.0f}", *[f"{v:.3f}" for v in a], "yes" if ok else "[red]no[/red]")
-    console.print(t)
-    angles = np.arange(np.ceil(model.range_deg[0] / 10) * 10, model.range_deg[1] + 1e-9, 10.0)
-    held = model.holdable_load_kg(angles)
-    console.print("holdable load (kg): " + ", ".join(f"{a:g} deg {h:.2f}" for a, h in zip(angles, held) if np.isfinite(h)))
-    console.print(f"ONNX vs Python {entry['max_abs_diff_vs_python']:.1e}; wrote {plot} and the model files")
