@@ -7,8 +7,8 @@ store's lock), writes never race, and "written" means "in the store", whatever h
 workers afterwards. The price is that each state's surfaces travel once over the dask
 connection (tens of kB to a few MB per state, negligible beside an FE solve).
 
-Scheduling: the pending points are laid along a short path (``design.solve_order``) and cut
-into contiguous chains. The driver keeps one chain per worker thread in flight and submits a
+Scheduling (persival.campaign.dask_chains): the pending points are laid along a short path
+(``design.solve_order``) and cut into contiguous chains. The driver keeps one chain per worker thread in flight and submits a
 chain's next state only when its previous one returned, pinned (softly) to the same worker, so
 that worker's cached simulator can warm-start from its neighbour. A chain that moves to
 another worker (the first died or was restarted) simply starts cold there.
@@ -29,23 +29,19 @@ import logging
 import math
 import time
 import uuid
-from collections import deque
 from pathlib import Path
 
 import numpy as np
 
-from persival.campaign.design import Design, chunks, solve_order
-from persival.campaign.execute import StateOutcome, StateTask, solve_state
+from persival.campaign.dask_chains import run_dask, state_tasks
+from persival.campaign.design import Design, solve_order
+from persival.campaign.execute import StateOutcome, solve_state
 from persival.campaign.simulator import SimulatorSpec, cached_simulator, simulator_factory
 from persival.campaign.store import CampaignStore
-from persival.cluster import local_cluster
 
 __all__ = ["run_campaign", "CampaignIncomplete", "INLINE"]
 
 INLINE = "inline"
-# Driver-side backstop beyond the per-attempt limits (worker start-up, queueing, cancel grace).
-_BACKSTOP_GRACE_S = 60.0
-_POLL_S = 0.5
 log = logging.getLogger(__name__)
 
 
@@ -93,26 +89,10 @@ def run_campaign(
     """
     _check_args(design, spec, timeout_s, max_attempts, n_workers, chunk_size)
     factory = simulator_factory(spec.kind)  # unknown kind: clear error before anything is written
-    store_path = Path(store_path)
-    if store_path.exists():
-        with CampaignStore.open(store_path) as existing:  # read-only: a mismatch leaves the store untouched
-            existing.check_matches(design, spec)
-        store = CampaignStore.open_for_writing(store_path)  # and again under the lock, below
-        try:
-            store.check_matches(design, spec)
-        except BaseException:
-            store.close()
-            raise
-    else:
-        reference = cached_simulator(spec, factory).reference()
-        store = CampaignStore.create(store_path, design, spec, reference)
+    store = _open_or_create(Path(store_path), design, spec, factory)
     t0 = time.perf_counter()
     try:
-        pending = store.pending(retry_failed)
-        order = solve_order(design.points)
-        rank = np.empty(len(order), dtype=np.int64)
-        rank[order] = np.arange(len(order))
-        pending = pending[np.argsort(rank[pending], kind="stable")]
+        pending = _in_solve_order(store.pending(retry_failed), design)
         tally = {"done": 0, "failed": 0, "lost": 0}
         if len(pending):
             with _Progress(len(pending), enabled=progress) as bar:
@@ -121,7 +101,7 @@ def run_campaign(
                     tally["done" if outcome.ok else "failed"] += 1
                     bar.advance(tally)
 
-                run = _run_inline if scheduler == INLINE else _run_dask
+                run = _run_inline if scheduler == INLINE else run_dask
                 run(store, design, spec, factory, pending, record, tally, scheduler=scheduler,
                     n_workers=n_workers, timeout_s=timeout_s, max_attempts=max_attempts,
                     chunk_size=chunk_size)
@@ -138,6 +118,30 @@ def run_campaign(
         store.close()
 
 
+def _open_or_create(store_path: Path, design: Design, spec: SimulatorSpec, factory) -> CampaignStore:
+    """The store to write: an existing one checked against the campaign (read-only first, so a
+    mismatch leaves it untouched, then again under the writer's lock), else a new one."""
+    if not store_path.exists():
+        return CampaignStore.create(store_path, design, spec, cached_simulator(spec, factory).reference())
+    with CampaignStore.open(store_path) as existing:
+        existing.check_matches(design, spec)
+    store = CampaignStore.open_for_writing(store_path)
+    try:
+        store.check_matches(design, spec)
+    except BaseException:
+        store.close()
+        raise
+    return store
+
+
+def _in_solve_order(pending: np.ndarray, design: Design) -> np.ndarray:
+    """The pending states in the design's solve order (neighbours one after another)."""
+    order = solve_order(design.points)
+    rank = np.empty(len(order), dtype=np.int64)
+    rank[order] = np.arange(len(order))
+    return pending[np.argsort(rank[pending], kind="stable")]
+
+
 def _write(store: CampaignStore, o: StateOutcome) -> None:
     stats = dict(o.statistics)
     if o.worker:
@@ -148,140 +152,16 @@ def _write(store: CampaignStore, o: StateOutcome) -> None:
         store.write_failed(o.index, o.reason, stats, o.wall_time_s, o.attempts)
 
 
-def _tasks(design: Design, indices, chain: str, timeout_s, max_attempts):
-    for i in indices:
-        yield StateTask(index=int(i), state_id=int(design.ids[i]),
-                        activations=np.array(design.points[i]), chain=chain,
-                        timeout_s=timeout_s, max_attempts=max_attempts)
-
-
 def _run_inline(store, design, spec, factory, pending, record, tally, *, timeout_s, max_attempts,
                 **_ignored) -> None:
     # One chain along the whole path: every state can warm-start from the previous one.
     chain = uuid.uuid4().hex
-    for task in _tasks(design, pending, chain, timeout_s, max_attempts):
+    for task in state_tasks(design, pending, chain, timeout_s, max_attempts):
         outcome = solve_state(spec, factory, task)
         if outcome.hung:
             log.warning("state %d: a hung attempt is left running in a daemon thread "
                         "(in-process mode cannot stop it)", task.index)
         record(outcome)
-
-
-def _run_dask(store, design, spec, factory, pending, record, tally, *, scheduler, n_workers,
-              timeout_s, max_attempts, chunk_size) -> None:
-    from distributed import Client
-
-    cluster = None
-    if scheduler is None:
-        cluster = local_cluster(n_workers)
-        client = Client(cluster)
-    else:
-        if n_workers is not None:
-            log.warning("n_workers is ignored with an existing scheduler (%s)", scheduler)
-        client = Client(scheduler, timeout="60s")
-    try:
-        _drive(client, design, spec, factory, pending, record, tally, timeout_s=timeout_s,
-               max_attempts=max_attempts, chunk_size=chunk_size)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-
-
-def _drive(client, design, spec, factory, pending, record, tally, *, timeout_s, max_attempts,
-           chunk_size) -> None:
-    from distributed import wait
-
-    try:
-        from distributed.scheduler import KilledWorker
-    except ImportError:  # pragma: no cover - older distributed
-        from distributed import KilledWorker
-
-    client.wait_for_workers(1, timeout=120)
-    slots = max(1, sum(client.nthreads().values()))
-    if chunk_size is None:
-        # About four chains per worker thread: long enough for warm starts to pay, short enough
-        # to balance states of unequal cost across workers.
-        n_chains = min(len(pending), 4 * slots)
-    else:
-        n_chains = math.ceil(len(pending) / chunk_size)
-    run_id = uuid.uuid4().hex[:12]
-    queue = deque(
-        deque(_tasks(design, piece, f"{run_id}-{k}", timeout_s, max_attempts))
-        for k, piece in enumerate(chunks(pending, n_chains))
-    )
-    backstop = None if timeout_s is None else max_attempts * timeout_s + _BACKSTOP_GRACE_S
-    active: dict = {}  # future -> (chain deque, submit time, task)
-
-    def submit(chain: deque, worker: str | None) -> None:
-        task = chain.popleft()
-        placement = {"workers": [worker], "allow_other_workers": True} if worker else {}
-        fut = client.submit(solve_state, spec, factory, task, pure=False,
-                            key=f"persival-state-{task.index}-{uuid.uuid4().hex[:8]}", **placement)
-        active[fut] = (chain, time.monotonic(), task)
-
-    def next_chain(chain: deque | None, worker: str | None) -> None:
-        if chain:
-            submit(chain, worker)
-        elif queue:
-            submit(queue.popleft(), worker)
-
-    for _ in range(slots):
-        if queue:
-            submit(queue.popleft(), None)
-
-    while active:
-        try:
-            done, _ = wait(list(active), timeout=_POLL_S, return_when="FIRST_COMPLETED")
-        except TimeoutError:
-            done = set()
-        for fut in done:
-            chain, _, task = active.pop(fut)
-            worker = None
-            try:
-                outcome = fut.result()
-                worker = outcome.worker
-            except KilledWorker as exc:
-                outcome = StateOutcome(index=task.index, ok=False, attempts=max_attempts,
-                                       reason=f"worker process died while solving this state "
-                                              f"(crash or out of memory): {exc}")
-            except Exception as exc:  # lost for another reason: leave it missing for a resume
-                log.warning("state %d lost (%s: %s); it stays missing", task.index,
-                            type(exc).__name__, exc)
-                tally["lost"] += 1
-                next_chain(chain, None)
-                continue
-            record(outcome)
-            if outcome.hung and worker:
-                # Only a new process stops a simulate() that ignores cancel().
-                _restart(client, [worker])
-                worker = None
-            next_chain(chain, worker)
-        if backstop is not None:
-            now = time.monotonic()
-            for fut, (chain, started, task) in list(active.items()):
-                if now - started <= backstop:
-                    continue
-                holders = [w for w, keys in client.processing().items() if fut.key in keys]
-                if not holders:
-                    # Still waiting for a worker (e.g. SLURM jobs queued): not running, not hung.
-                    active[fut] = (chain, now, task)
-                    continue
-                fut.cancel()
-                del active[fut]
-                record(StateOutcome(index=task.index, ok=False, attempts=1, wall_time_s=now - started,
-                                    reason=f"timeout: no answer from the worker after {now - started:.0f} s "
-                                           "(worker unresponsive; restarted)"))
-                _restart(client, holders)
-                next_chain(chain, None)
-
-
-def _restart(client, workers: list[str]) -> None:
-    try:
-        client.restart_workers(workers, timeout=120, raise_for_error=False)
-    except Exception as exc:  # e.g. workers started without a nanny cannot be restarted
-        log.warning("could not restart worker(s) %s (%s: %s); a hung solve may keep occupying "
-                    "them", workers, type(exc).__name__, exc)
 
 
 class _Progress:

@@ -127,54 +127,21 @@ def run_adaptive_campaign(
     ``scheduler`` defaults to in-process so that the simulator, its meshes and its solved
     states stay warm from one step to the next.
     """
-    from persival.campaign.runner import run_campaign
-
     t0 = time.perf_counter()
     out = Path(out)
-    stores_dir = out / "stores"  # created by the first step that solves states, not before
     pool = StatePool(muscle)
-    for path in seed_stores:
-        pool.add_store(path)
-    for path in sorted(stores_dir.glob("*.zarr")):
+    for path in [*seed_stores, *sorted((out / "stores").glob("*.zarr"))]:
         pool.add_store(path)
     if pool.spec is not None and pool.spec != spec:
         raise ValueError(f"the seed stores / earlier steps were computed with {pool.spec}, not {spec}")
-
-    steps: list[dict] = []
-    counts = {"simulated": 0, "reused": 0}
-
-    def simulate(points: np.ndarray) -> np.ndarray:
-        values, found = pool.lookup(points)
-        missing = np.flatnonzero(~found)
-        step = {"new_points": len(points), "reused": int(found.sum()), "simulated": len(missing), "store": None}
-        counts["reused"] += int(found.sum())
-        if len(missing):
-            design = Design(points[missing], np.arange(len(missing)),
-                            {"kind": "adaptive", "step": len(steps), "muscle": muscle})
-            path = stores_dir / f"step-{design.digest()[:12]}.zarr"
-            log(f"step {len(steps)}: {len(points)} new grid points, {int(found.sum())} already solved, "
-                f"solving {len(missing)} into {path.name}")
-            summary = run_campaign(path, design, spec, scheduler=scheduler, n_workers=n_workers,
-                                   timeout_s=timeout_s, max_attempts=max_attempts, progress=progress)
-            if summary["failed"] or summary["missing"]:
-                raise RuntimeError(
-                    f"{summary['failed']} state(s) of {path} failed ({summary['failure_reasons']}); an "
-                    "interpolating grid needs every point: retry them with `persival campaign run "
-                    f"--store {path} --retry-failed`, then run this command again"
-                )
-            pool.add_store(path)
-            counts["simulated"] += summary["this_run"]["computed"]
-            step["store"] = path.name
-            values, found = pool.lookup(points)
-        else:
-            log(f"step {len(steps)}: {len(points)} new grid points, all already solved")
-        steps.append(step)
-        return values
-
+    simulate = _StepSimulator(pool, spec, out / "stores", muscle, log,
+                              dict(scheduler=scheduler, n_workers=n_workers, timeout_s=timeout_s,
+                                   max_attempts=max_attempts, progress=progress))
     result = refine_adaptive(
         simulate, 5, max_points=max_points, degree=degree, initial_level=initial_level,
         refinements_per_step=refinements_per_step, norm=norm, tol=tol, center=True,
     )
+    steps = simulate.steps
     for step, n in zip(steps, np.cumsum([s["new_points"] for s in steps])):
         step["grid_points"] = int(n)
     surrogate = SparseGridSurrogate(muscle, degree).fit_values(
@@ -187,10 +154,56 @@ def run_adaptive_campaign(
                       "max_points": max_points, "tol": tol, "stop_reason": result.stop_reason}},
     )
     surrogate.save(out / "surrogate")
-    res = AdaptiveCampaignResult(surrogate, steps, counts["simulated"], counts["reused"],
+    res = AdaptiveCampaignResult(surrogate, steps, simulate.simulated, simulate.reused,
                                  result.stop_reason, time.perf_counter() - t0)
     (out / "adaptive.json").write_text(json.dumps(
         {"steps": steps, "simulated": res.simulated, "reused": res.reused,
          "stop_reason": res.stop_reason, "wall_time_s": res.wall_time_s,
          "grid_points": surrogate.grid.n_points}, indent=1))
     return res
+
+
+class _StepSimulator:
+    """The refinement's simulator: each step's new grid points, those already solved (in the seed
+    stores or an earlier step) looked up, the others solved into a store of their own."""
+
+    def __init__(self, pool: StatePool, spec: SimulatorSpec, stores_dir: Path, muscle: str,
+                 log: Callable[[str], None], campaign_options: dict):
+        self.pool, self.spec, self.stores_dir, self.muscle, self.log = pool, spec, stores_dir, muscle, log
+        self.campaign_options = campaign_options
+        self.steps: list[dict] = []
+        self.simulated = self.reused = 0
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        values, found = self.pool.lookup(points)
+        missing = np.flatnonzero(~found)
+        step = {"new_points": len(points), "reused": int(found.sum()), "simulated": len(missing), "store": None}
+        self.reused += int(found.sum())
+        if len(missing):
+            step["store"] = self._solve(points[missing], len(points), int(found.sum()))
+            values, found = self.pool.lookup(points)
+        else:
+            self.log(f"step {len(self.steps)}: {len(points)} new grid points, all already solved")
+        self.steps.append(step)
+        return values
+
+    def _solve(self, points: np.ndarray, n_new: int, n_found: int) -> str:
+        """Solve ``points`` into a new store (created here, not before: a step that solves nothing
+        writes nothing); returns its name."""
+        from persival.campaign.runner import run_campaign
+
+        design = Design(points, np.arange(len(points)), {"kind": "adaptive", "step": len(self.steps),
+                                                          "muscle": self.muscle})
+        path = self.stores_dir / f"step-{design.digest()[:12]}.zarr"
+        self.log(f"step {len(self.steps)}: {n_new} new grid points, {n_found} already solved, "
+                 f"solving {len(points)} into {path.name}")
+        summary = run_campaign(path, design, self.spec, **self.campaign_options)
+        if summary["failed"] or summary["missing"]:
+            raise RuntimeError(
+                f"{summary['failed']} state(s) of {path} failed ({summary['failure_reasons']}); an "
+                "interpolating grid needs every point: retry them with `persival campaign run "
+                f"--store {path} --retry-failed`, then run this command again"
+            )
+        self.pool.add_store(path)
+        self.simulated += summary["this_run"]["computed"]
+        return path.name

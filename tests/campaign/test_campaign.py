@@ -489,10 +489,10 @@ class GilHoggingSimulator(FlakySimulator):
 
 @pytest.mark.slow
 def test_hung_and_unresponsive_workers_on_dask(tmp_path, monkeypatch):
-    from persival.campaign import runner
+    from persival.campaign import dask_chains
 
     # The driver's backstop (for workers that cannot even answer) at 3 x 1 s + 2 s.
-    monkeypatch.setattr(runner, "_BACKSTOP_GRACE_S", 2.0)
+    monkeypatch.setattr(dask_chains, "_BACKSTOP_GRACE_S", 2.0)
     register_simulator("gil-hog", GilHoggingSimulator)
     t0 = time.monotonic()
     s = run_campaign(tmp_path / "h.zarr", _flaky_design(), SimulatorSpec("gil-hog", {"mesh_size": 14.0}),
