@@ -159,13 +159,7 @@ def solve_state(spec: SimulatorSpec, factory, task: StateTask) -> StateOutcome:
             result, new_token = _call_with_timeout(sim, alpha.copy(), token, attempt, task.timeout_s)
             positions = _check_result(result, shapes)
         except _Hung as hung:
-            # The abandoned attempt may still use `sim`: later states get a fresh instance,
-            # and nothing of this one (tokens, shapes keyed by its id) may leak to it.
-            forget_cached_simulator(spec)
-            with _LOCK:
-                for k in [k for k in _TOKENS if k[0] == id(sim)]:
-                    del _TOKENS[k]
-                _SHAPES.pop(id(sim), None)
+            _forget(spec, sim)
             out.hung = True
             out.reason = str(hung.__cause__)
             break
@@ -186,11 +180,7 @@ def solve_state(spec: SimulatorSpec, factory, task: StateTask) -> StateOutcome:
         out.positions = positions
         out.statistics = stats
         if new_token is not None:
-            with _LOCK:
-                _TOKENS[key] = new_token
-                _TOKENS.move_to_end(key)
-                while len(_TOKENS) > _MAX_TOKENS:
-                    _TOKENS.popitem(last=False)
+            _remember(key, new_token)
         break
     if not out.ok:
         out.statistics = {"attempt_errors": errors} if errors else {}
@@ -198,3 +188,22 @@ def solve_state(spec: SimulatorSpec, factory, task: StateTask) -> StateOutcome:
             out.reason = f"{errors[-1]} (after {len(errors)} attempts)"
     out.wall_time_s = time.perf_counter() - t0
     return out
+
+
+def _forget(spec: SimulatorSpec, sim) -> None:
+    """After a hung attempt: the abandoned attempt may still use ``sim``, so later states get a
+    fresh instance, and nothing of this one (tokens, shapes keyed by its id) may leak to it."""
+    forget_cached_simulator(spec)
+    with _LOCK:
+        for k in [k for k in _TOKENS if k[0] == id(sim)]:
+            del _TOKENS[k]
+        _SHAPES.pop(id(sim), None)
+
+
+def _remember(key: tuple, token) -> None:
+    """A solved state's warm-start token for the next state of its chain (the newest kept)."""
+    with _LOCK:
+        _TOKENS[key] = token
+        _TOKENS.move_to_end(key)
+        while len(_TOKENS) > _MAX_TOKENS:
+            _TOKENS.popitem(last=False)

@@ -64,7 +64,6 @@ def create_layout(path: Path, design: Design, spec: SimulatorSpec, reference: Re
     tmp = path.with_name(f".{path.name}.creating-{os.getpid()}")
     if tmp.exists():
         shutil.rmtree(tmp)
-    n = len(design)
     try:
         root = zarr.open_group(str(tmp), mode="w-", zarr_format=3)
         root.attrs.update({
@@ -82,33 +81,39 @@ def create_layout(path: Path, design: Design, spec: SimulatorSpec, reference: Re
                 "created": now(),
             },
         })
-        d = root.create_group("design")
-        d.create_array("ids", data=np.asarray(design.ids, dtype=np.int64))
-        d.create_array("activations", data=np.asarray(design.points, dtype=np.float64))
-        ref = root.create_group("reference")
-        for name, surf in reference.surfaces.items():
-            g = ref.create_group(name)
-            g.create_array("points", data=surf.reference_points)
-            g.create_array("triangles", data=surf.triangles)
-            if surf.node_ids is not None:
-                g.create_array("node_ids", data=surf.node_ids)
-        st = root.create_group("states")
-        # One chunk per state everywhere: concurrent or interrupted writes of different
-        # states never touch the same file. Flat chunk names ("c.17.0.0") rather than
-        # nested directories halve the number of inodes a campaign creates.
-        flat = {"chunk_key_encoding": {"name": "default", "separator": "."}}
-        st.create_array("status", shape=(n,), chunks=(1,), dtype="i1", fill_value=MISSING, **flat)
-        for key in ("elbow_angle_deg", "wall_time_s", "finished_at"):
-            st.create_array(key, shape=(n,), chunks=(1,), dtype="f8", fill_value=np.nan, **flat)
-        st.create_array("attempts", shape=(n,), chunks=(1,), dtype="i2", fill_value=0, **flat)
-        for key in ("reason", "statistics"):
-            st.create_array(key, shape=(n,), chunks=(1,), dtype=str, fill_value="", **flat)
-        pos = st.create_group("positions")
-        for name, surf in reference.surfaces.items():
-            m = surf.n_nodes
-            pos.create_array(name, shape=(n, m, 3), chunks=(1, m, 3), dtype="f8",
-                             fill_value=np.nan, **flat)
+        _create_arrays(root, design, reference)
         os.rename(tmp, path)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def _create_arrays(root, design: Design, reference: ReferenceGeometry) -> None:
+    """The design, the reference surfaces and the empty per-state arrays (one chunk per state)."""
+    n = len(design)
+    d = root.create_group("design")
+    d.create_array("ids", data=np.asarray(design.ids, dtype=np.int64))
+    d.create_array("activations", data=np.asarray(design.points, dtype=np.float64))
+    ref = root.create_group("reference")
+    for name, surf in reference.surfaces.items():
+        g = ref.create_group(name)
+        g.create_array("points", data=surf.reference_points)
+        g.create_array("triangles", data=surf.triangles)
+        if surf.node_ids is not None:
+            g.create_array("node_ids", data=surf.node_ids)
+    st = root.create_group("states")
+    # One chunk per state everywhere: concurrent or interrupted writes of different
+    # states never touch the same file. Flat chunk names ("c.17.0.0") rather than
+    # nested directories halve the number of inodes a campaign creates.
+    flat = {"chunk_key_encoding": {"name": "default", "separator": "."}}
+    st.create_array("status", shape=(n,), chunks=(1,), dtype="i1", fill_value=MISSING, **flat)
+    for key in ("elbow_angle_deg", "wall_time_s", "finished_at"):
+        st.create_array(key, shape=(n,), chunks=(1,), dtype="f8", fill_value=np.nan, **flat)
+    st.create_array("attempts", shape=(n,), chunks=(1,), dtype="i2", fill_value=0, **flat)
+    for key in ("reason", "statistics"):
+        st.create_array(key, shape=(n,), chunks=(1,), dtype=str, fill_value="", **flat)
+    pos = st.create_group("positions")
+    for name, surf in reference.surfaces.items():
+        m = surf.n_nodes
+        pos.create_array(name, shape=(n, m, 3), chunks=(1, m, 3), dtype="f8",
+                         fill_value=np.nan, **flat)

@@ -37,6 +37,7 @@ def _register() -> None:
     from persival.cli import campaign as campaign_commands
     from persival.cli import deploy as deploy_commands
     from persival.cli import evaluate as evaluate_commands
+    from persival.cli import inspect as inspect_commands
     from persival.cli import model as model_commands
     from persival.cli import motion as motion_commands
     from persival.cli import run as run_command
@@ -50,6 +51,7 @@ def _register() -> None:
     surrogate_commands.register(app)
     motion_commands.register(app)
     evaluate_commands.register(app)
+    inspect_commands.register(app)
     deploy_commands.register(app)
     bench_commands.register(bench_app)
 

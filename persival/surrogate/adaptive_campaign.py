@@ -144,15 +144,10 @@ def run_adaptive_campaign(
     steps = simulate.steps
     for step, n in zip(steps, np.cumsum([s["new_points"] for s in steps])):
         step["grid_points"] = int(n)
-    surrogate = SparseGridSurrogate(muscle, degree).fit_values(
-        result.grid, result.values[:, :-1].reshape(len(result.values), -1, 3), result.values[:, -1],
-        pool.surface,
-        {"store": [str(s) for s in pool.stores], "model_hash": pool.model_hash,
-         "simulator": json.loads(spec.to_json()),
-         "adaptive": {"grid_points_per_step": [s["grid_points"] for s in steps], "norm": norm,
-                      "initial_level": initial_level, "refinements_per_step": refinements_per_step,
-                      "max_points": max_points, "tol": tol, "stop_reason": result.stop_reason}},
-    )
+    surrogate = _fit_surrogate(result, pool, spec, muscle, degree, {
+        "grid_points_per_step": [s["grid_points"] for s in steps], "norm": norm, "initial_level": initial_level,
+        "refinements_per_step": refinements_per_step, "max_points": max_points, "tol": tol,
+        "stop_reason": result.stop_reason})
     surrogate.save(out / "surrogate")
     res = AdaptiveCampaignResult(surrogate, steps, simulate.simulated, simulate.reused,
                                  result.stop_reason, time.perf_counter() - t0)
@@ -161,6 +156,17 @@ def run_adaptive_campaign(
          "stop_reason": res.stop_reason, "wall_time_s": res.wall_time_s,
          "grid_points": surrogate.grid.n_points}, indent=1))
     return res
+
+
+def _fit_surrogate(result, pool: StatePool, spec: SimulatorSpec, muscle: str, degree: int,
+                   adaptive: dict) -> SparseGridSurrogate:
+    """The adaptive grid's surrogate of ``muscle`` (surface and elbow angle), with its provenance."""
+    return SparseGridSurrogate(muscle, degree).fit_values(
+        result.grid, result.values[:, :-1].reshape(len(result.values), -1, 3), result.values[:, -1],
+        pool.surface,
+        {"store": [str(s) for s in pool.stores], "model_hash": pool.model_hash,
+         "simulator": json.loads(spec.to_json()), "adaptive": adaptive},
+    )
 
 
 class _StepSimulator:

@@ -149,35 +149,9 @@ def train(dataset, config: TrainingConfig, out: str | Path, progress=None, devic
     generator = torch.Generator().manual_seed(config.seed)
     if state.get("generator") is not None:  # the batch order continues where it stopped
         generator.set_state(state["generator"])
-    total_epochs = config.folds * config.epochs
     while state["fold"] < len(folds):
-        train_rows, val_rows = (torch.as_tensor(r, device=place) for r in folds[state["fold"]])
-        net = copy.deepcopy(template).to(place)
-        optimizer = torch.optim.Adam(net.parameters(), lr=config.learning_rate)
-        schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=config.epochs, eta_min=config.learning_rate / 50)
-        if state["net"] is not None:  # resuming inside this fold
-            net.load_state_dict(state["net"])
-            optimizer.load_state_dict(state["optimizer"])
-            schedule.load_state_dict(state["schedule"])
-        x_train, y_train = x[train_rows], y[train_rows]
-        x_val, y_val, u_val = x[val_rows], y[val_rows], ut[val_rows]  # once a fold, not every epoch
-        while state["epoch"] < config.epochs:
-            t0 = time.perf_counter()
-            train_loss = _epoch(net, optimizer, x_train, y_train, config.batch_size, generator)
-            schedule.step()
-            val_loss, mae = _validate(net, x_val, y_val, u_val)
-            state["epoch"] += 1
-            state["history"].append({"fold": state["fold"], "epoch": state["epoch"], "train_loss": train_loss,
-                                     "val_loss": val_loss, "val_mae_mm": mae})
-            if state["best"] is None or val_loss < state["best"]["val_loss"]:
-                state["best"] = {"val_loss": val_loss, "fold": state["fold"], "epoch": state["epoch"],
-                                 "net": {k: v.detach().to("cpu", copy=True) for k, v in net.state_dict().items()}}
-            state.update(net=net.state_dict(), optimizer=optimizer.state_dict(), schedule=schedule.state_dict(),
-                         generator=generator.get_state(), wall_time_s=state["wall_time_s"] + time.perf_counter() - t0)
-            _save_atomic(state, checkpoint)
-            if progress is not None:
-                progress(state["fold"] * config.epochs + state["epoch"], total_epochs, val_loss, mae,
-                         epoch_label(state["fold"], len(folds), state["epoch"], config.epochs))
+        data = (x, y, ut, *(torch.as_tensor(r, device=place) for r in folds[state["fold"]]))
+        _train_fold(state, template, data, config, generator, checkpoint, progress, len(folds), place)
         state.update(fold=state["fold"] + 1, epoch=0, net=None, optimizer=None, schedule=None)
         _save_atomic(state, checkpoint)
     best = copy.deepcopy(template)
@@ -186,6 +160,40 @@ def train(dataset, config: TrainingConfig, out: str | Path, progress=None, devic
     summary = {"best": {k: v for k, v in state["best"].items() if k != "net"}, "history": state["history"],
                "wall_time_s": state["wall_time_s"], "rank": rank, "config": asdict(config)}
     return best, summary
+
+
+def _train_fold(state: dict, template, data, config: TrainingConfig, generator, checkpoint: Path, progress,
+                n_folds: int, place) -> None:
+    """The epochs of ``state``'s fold, from where the state stopped: after each one the best net so
+    far and the whole state (net, optimizer, schedule, batch order) are saved, so a kill loses an
+    epoch at most."""
+    x, y, ut, train_rows, val_rows = data
+    net = copy.deepcopy(template).to(place)
+    optimizer = torch.optim.Adam(net.parameters(), lr=config.learning_rate)
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=config.epochs, eta_min=config.learning_rate / 50)
+    if state["net"] is not None:  # resuming inside this fold
+        net.load_state_dict(state["net"])
+        optimizer.load_state_dict(state["optimizer"])
+        schedule.load_state_dict(state["schedule"])
+    x_train, y_train = x[train_rows], y[train_rows]
+    x_val, y_val, u_val = x[val_rows], y[val_rows], ut[val_rows]  # once a fold, not every epoch
+    while state["epoch"] < config.epochs:
+        t0 = time.perf_counter()
+        train_loss = _epoch(net, optimizer, x_train, y_train, config.batch_size, generator)
+        schedule.step()
+        val_loss, mae = _validate(net, x_val, y_val, u_val)
+        state["epoch"] += 1
+        state["history"].append({"fold": state["fold"], "epoch": state["epoch"], "train_loss": train_loss,
+                                 "val_loss": val_loss, "val_mae_mm": mae})
+        if state["best"] is None or val_loss < state["best"]["val_loss"]:
+            state["best"] = {"val_loss": val_loss, "fold": state["fold"], "epoch": state["epoch"],
+                             "net": {k: v.detach().to("cpu", copy=True) for k, v in net.state_dict().items()}}
+        state.update(net=net.state_dict(), optimizer=optimizer.state_dict(), schedule=schedule.state_dict(),
+                     generator=generator.get_state(), wall_time_s=state["wall_time_s"] + time.perf_counter() - t0)
+        _save_atomic(state, checkpoint)
+        if progress is not None:
+            progress(state["fold"] * config.epochs + state["epoch"], n_folds * config.epochs, val_loss, mae,
+                     epoch_label(state["fold"], n_folds, state["epoch"], config.epochs))
 
 
 def _resume(checkpoint: Path, config: TrainingConfig, dataset):

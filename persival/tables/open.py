@@ -32,7 +32,8 @@ def ensure_tables(model_file=None, profile: str = "quick", tables: str | None = 
                   scheduler: str | None = None, n_workers: int | None = None, angles=None, levels=None):
     """Build (or finish) the response tables the ``tables`` method needs; returns the table.
     ``angles``, ``levels``: the grid (default: response_table's DEFAULT_ANGLES, DEFAULT_LEVELS)."""
-    from persival.tables.response_table import DEFAULT_ANGLES, DEFAULT_LEVELS, build_response_table
+    from persival.tables.response_table import DEFAULT_ANGLES, DEFAULT_LEVELS
+    from persival.tables.table_build import build_response_table
 
     arm = ArmModel(model_file, profile)
     arm.rest_states()  # cached: the table workers read each muscle's rest state from it

@@ -7,7 +7,7 @@ import pytest
 from typer.testing import CliRunner
 
 from persival.cli import app
-from persival.model.anatomy.schema import ModelFileError
+from persival.model.anatomy.schema_base import ModelFileError
 from persival.model.arm.arm_model import ArmModel, muscle_profile
 from persival.model.arm.defaults import default_model_path, packaged_models, resolve_model_path
 from persival.model.arm.model_file import load_model_file

@@ -96,7 +96,7 @@ def test_the_forearm_bones_turn_about_the_humerus_without_entering_it(arm, shape
 
 
 def test_a_model_file_sets_the_shape_and_keeps_its_defaults(tmp_path):
-    from persival.model.anatomy.schema import ModelFileError
+    from persival.model.anatomy.schema_base import ModelFileError
     from persival.model.arm.defaults import default_model_path
     from persival.model.arm.model_file import load_model_file
 

@@ -7,8 +7,9 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from contact_differences import differences
 
+from persival.model.anatomy.bone_schema import Bone
+from persival.model.anatomy.muscle_schema import Muscle
 from persival.model.anatomy.obstacles import Capsule, HalfSpace, bone_obstacles
-from persival.model.anatomy.schema import Bone, Muscle
 from persival.model.arm.arm_model import muscle_profile, rotation_about
 from persival.model.fe.assembly import MaterialField
 from persival.model.fe.constraints import Dirichlet

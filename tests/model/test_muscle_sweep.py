@@ -10,7 +10,7 @@ import re
 import numpy as np
 import pytest
 
-from persival.model.anatomy.schema import ModelFileError
+from persival.model.anatomy.schema_base import ModelFileError
 from persival.model.arm.defaults import default_model_path
 from persival.model.arm.kinematics import ArmKinematics
 from persival.model.arm.model_file import load_model_file

@@ -104,7 +104,7 @@ def test_a_wall_that_turns_with_the_elbow_turns_about_its_pivot_smoothly():
 
 
 def test_a_turning_wall_without_a_pivot_is_refused(tmp_path):
-    from persival.model.anatomy.schema import ModelFileError
+    from persival.model.anatomy.schema_base import ModelFileError
     from persival.model.arm.defaults import default_model_path
     from persival.model.arm.model_file import load_model_file
 

@@ -21,7 +21,8 @@ import numpy as np
 import pytest
 
 from persival.tables.moment_table import TableMismatchError
-from persival.tables.response_table import ResponseTable, build_response_table
+from persival.tables.response_table import ResponseTable
+from persival.tables.table_build import build_response_table
 from persival.tables.table_solve import OutsideTableError, TableSolver
 from persival.vocabulary import MUSCLES
 

@@ -248,7 +248,7 @@ def _humerus_solid(shape, line, layout: ArticularLayout, shaft_radius: float, fo
 
 def _solids(spec, frame: ElbowFrame) -> dict:
     """name -> (solid, box lower, box upper) in the elbow frame, for every bone with an anatomical shape."""
-    from persival.model.anatomy.schema import HumerusShape, UlnaShape
+    from persival.model.anatomy.bone_schema import HumerusShape, UlnaShape
 
     shapes = {b.name: b.drawn_shape() for b in spec.bones}
     lines = {b.name: (frame.local(b.start), frame.local(b.end)) for b in spec.bones}

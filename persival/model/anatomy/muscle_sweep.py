@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from persival.model.anatomy.schema import Muscle
+from persival.model.anatomy.muscle_schema import Muscle
 
 __all__ = ["Sweep", "muscle_profile", "outlined_centre_line", "sweep_sections"]
 

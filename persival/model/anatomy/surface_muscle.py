@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from persival.model.anatomy.laplace_fibres import LaplaceFibres, laplace_fibres
-from persival.model.anatomy.schema import Muscle
+from persival.model.anatomy.muscle_schema import Muscle
 from persival.model.anatomy.surface_import import PlacedSurface, place_surface
 from persival.model.anatomy.surface_mesh import VolumeMesh, volume_mesh
 from persival.model.fe.mesh import MeshError, Tet10Mesh

@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from persival.model.anatomy.bone_fields import bone_fields
+from persival.model.anatomy.muscle_schema import Muscle
 from persival.model.anatomy.muscle_sweep import muscle_profile
 from persival.model.anatomy.obstacles import bone_obstacles
-from persival.model.anatomy.schema import Muscle
 from persival.model.anatomy.walls import septum_sides, wall_obstacles
 from persival.model.arm.arm_cache import ArmStateCache
 from persival.model.arm.arm_state import ArmState

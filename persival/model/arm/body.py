@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from persival.model.anatomy.muscle_schema import Muscle
 from persival.model.anatomy.muscle_sweep import muscle_profile
-from persival.model.anatomy.schema import Muscle
 from persival.model.anatomy.surface_muscle import place_muscle_surface, surface_muscle
 from persival.model.arm.external_moments import ExternalMoments
 from persival.model.arm.kinematics import ArmKinematics

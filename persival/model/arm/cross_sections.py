@@ -22,7 +22,7 @@ import numpy as np
 
 from persival.model.anatomy.bone_shapes import ElbowFrame, bone_shapes
 from persival.model.anatomy.overlap import Body, signed_distance
-from persival.model.anatomy.schema import ModelFileError
+from persival.model.anatomy.schema_base import ModelFileError
 
 if TYPE_CHECKING:  # a type only: the kinematics check outlines with this module
     from persival.model.arm.kinematics import ArmKinematics

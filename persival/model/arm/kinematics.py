@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from persival.model.anatomy.muscle_schema import Muscle
 from persival.model.anatomy.muscle_sweep import Sweep, outlined_centre_line, sweep_sections
-from persival.model.anatomy.schema import Muscle
 from persival.model.anatomy.wrapping import WrapCylinder
 from persival.model.arm.cross_sections import check_outlines as refuse_overlaps
 from persival.model.arm.model_file import load_model_file

@@ -15,7 +15,8 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from persival.model.anatomy.schema import ArmModelFile, ModelFileError
+from persival.model.anatomy.schema import ArmModelFile
+from persival.model.anatomy.schema_base import ModelFileError
 from persival.model.arm.defaults import packaged_models, resolve_model_path
 
 # Bumped whenever the physics code changes the states a model file produces, so that stores,

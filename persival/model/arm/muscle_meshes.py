@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from persival.model.anatomy.muscle_schema import Muscle
 from persival.model.anatomy.muscle_sweep import muscle_profile
-from persival.model.anatomy.schema import Muscle
 from persival.model.anatomy.surface_muscle import surface_muscle
 from persival.model.arm.body import ArmBody
 from persival.model.fe.mesh import Tet10Mesh
