@@ -18,149 +18,23 @@ from __future__ import annotations
 
 import json
 import re
-import textwrap
 from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
-__all__ = ["BLOCKS", "DEFAULT_FILES", "format_mb", "format_mm", "format_ms", "load_results", "render", "rewrite", "rewrite_file"]
+from persival.evaluate import results_text as rt
+
+__all__ = ["BLOCKS", "DEFAULT_FILES", "load_results", "render", "rewrite", "rewrite_file"]
 
 DEFAULT_FILES = ("README.md", "docs/benchmarks.md")
 _MARKER = re.compile(r"<!-- results:(?P<name>[a-z0-9-]+) -->\n(?P<body>.*?)<!-- /results:(?P=name) -->", re.DOTALL)
 _OPENING = re.compile(r"<!-- results:([a-z0-9-]+) -->")
-_DEPLOYED = re.compile(r"^(?P<role>deployed|exported) (?P<arch>\S+) ONNX (?P<tier>\S+)$")
-_NAMES = {"structured": "structured model", "pod": "POD network", "paper": "paper network"}
-
-
-# ---- numbers as the blocks print them ----------------------------------------------------------
-
-def format_mm(value) -> str:
-    """Lengths and angles: two decimals, three below 0.1 (0.042 mm would read 0.04)."""
-    if value is None:
-        return "-"
-    return f"{value:.2f}" if abs(value) >= 0.1 else f"{value:.3f}"
-
-
-def format_ms(value) -> str:
-    """Times: about three significant digits, from 0.023 ms to 101.3 ms."""
-    if value is None:
-        return "-"
-    return f"{value:.3f}" if value < 1 else f"{value:.2f}" if value < 10 else f"{value:.1f}"
-
-
-def format_mb(value) -> str:
-    if value is None:
-        return "-"
-    return f"{value:.2f}" if value < 10 else f"{value:.1f}"
-
-
-def _minutes(seconds: float) -> str:
-    return f"{seconds / 60:.1f} min"
-
-
-def _joined(values, fmt: Callable, unit: str) -> str:
-    """``a / b / c unit``; an empty string where no value is known (a blank cell)."""
-    if all(v is None for v in values):
-        return ""
-    return " / ".join(fmt(v) for v in values) + f" {unit}"
-
-
-def _row(cells) -> str:
-    return "|" + "|".join(f" {c} " if c else " " for c in cells) + "|"
-
-
-def _paragraph(text: str) -> str:
-    # wrapped as the hand-written prose around it, so that a regenerated block diffs line by line
-    return textwrap.fill(text, width=100, break_long_words=False, break_on_hyphens=False)
-
-
-def _table(header, rows) -> str:
-    return "\n".join([_row(header), "|" + "---|" * len(header), *(_row(r) for r in rows)])
 
 
 # ---- what results.json holds -------------------------------------------------------------------
 
-def _tables(results: dict, name: str) -> dict:
-    return (results.get("tables") or {}).get(name) or {}
-
-
-def _held_out_row(results: dict, surrogate: str, scope: str = "all") -> dict | None:
-    """A row of the error-propagation table against the held-out states (not the SG's support points)."""
-    for row in _tables(results, "error_propagation").get("rows", []):
-        if row.get("surrogate") == surrogate and row.get("scope") == scope and "held-out" in str(row.get("tested_on")):
-            return row
-    return None
-
-
-def _paper_row(table: dict, word: str) -> dict | None:
-    return next((r for r in table.get("paper", []) if word in str(r.get("surrogate") or r.get("network"))), None)
-
-
-def _deployed_model(results: dict) -> str | None:
-    return (results.get("summary") or {}).get("deployed_model")
-
-
-def _deployed_held_out(results: dict) -> dict | None:
-    return (results.get("summary") or {}).get("held_out")
-
-
-def _truth(results: dict) -> str:
-    """What the held-out states are: FE states only when the FE arm solved them."""
-    source = _tables(results, "error_propagation").get("truth_source") or {}
-    simulator = str(source.get("simulator", ""))
-    return "FE" if simulator.startswith("arm") else simulator or "simulator"
-
-
-def _bench_rows(results: dict) -> list[dict]:
-    return _tables(results, "bench_nn").get("rows", [])
-
-
-def _bench(results: dict, match: Callable[[dict], bool], threads: int = 1, batch: int = 1) -> dict | None:
-    return next((r for r in _bench_rows(results) if r.get("threads") == threads and r.get("batch") == batch
-                 and match(r)), None)
-
-
-def _exports(results: dict) -> dict[tuple[str, str], list[str]]:
-    """{(role, architecture): [tiers in the bench's order]} of the ONNX rows (role: deployed or exported)."""
-    found: dict[tuple[str, str], list[str]] = {}
-    for row in _bench_rows(results):
-        m = _DEPLOYED.match(str(row.get("variant")))
-        if m and m["tier"] not in found.setdefault((m["role"], m["arch"]), []):
-            found[(m["role"], m["arch"])].append(m["tier"])
-    return found
-
-
-def _tier_rows(results, role, arch, tiers, threads, batch) -> list[dict | None]:
-    return [_bench(results, lambda r, t=t: r.get("variant") == f"{role} {arch} ONNX {t}", threads, batch) for t in tiers]
-
-
-def _stage(results: dict, name: str) -> dict:
-    return (results.get("stages") or {}).get(name) or {}
-
-
-def _measured(results: dict) -> str:
-    """Date, commit and machine of the run (results.json ``provenance``)."""
-    provenance = results.get("provenance") or {}
-    parts = [str(provenance.get("date", ""))[:10] or None]
-    git = provenance.get("git") or {}
-    if git.get("commit"):
-        parts.append(f"commit {git['commit'][:7]}" + (" with uncommitted changes" if git.get("dirty") else ""))
-    cpus = (provenance.get("machine") or {}).get("cpu_count")
-    parts.append(f"{cpus} CPUs" if cpus else None)
-    return ", ".join(p for p in parts if p)
-
-
-def _command(results: dict) -> str:
-    return (results.get("provenance") or {}).get("report_command") or "persival report"
-
 
 # ---- the blocks --------------------------------------------------------------------------------
-
-def _sg_label(results: dict) -> str:
-    sg = (results.get("configuration") or {}).get("sg") or {}
-    if sg.get("level") is None or sg.get("grid_points") is None:
-        return "sparse grid"
-    return f"sparse grid, level {sg['level']} ({sg['grid_points']} {_truth(results)} states)"
 
 
 class _Accuracy(NamedTuple):
@@ -176,12 +50,12 @@ class _Accuracy(NamedTuple):
 
 
 def _deployed_accuracy(results: dict) -> _Accuracy | None:
-    held, name = _deployed_held_out(results), _deployed_model(results)
+    held, name = rt.deployed_held_out(results), rt.deployed_model(results)
     if not held:
         return None
     # the export's own measurement is of its float32 file; without one the summary took the network's table row
     exported = held.get("from") == "export/metadata.json"
-    return _Accuracy(f"{_NAMES.get(name, name)} (deployed, {'ONNX float32' if exported else 'before export'})",
+    return _Accuracy(f"{rt.NAMES.get(name, name)} (deployed, {'ONNX float32' if exported else 'before export'})",
                      held.get("max_ae_mm"), held.get("mae_mm"), held.get("max_angle_error_deg"),
                      "export stage (`summary.held_out`)" if exported else "evaluate stage (`error_propagation`)",
                      deployed=True)
@@ -193,12 +67,12 @@ def _accuracy_rows(results: dict) -> list[_Accuracy]:
     rows = [deployed] if deployed else []
     for surrogate, scope, label, short in (
             ("FE response tables (table-only)", "all", "response tables without FE solve (table-only)", ""),
-            ("SG", "all", _sg_label(results), _sg_label(results).split(" (")[0]),
+            ("SG", "all", rt.sg_label(results), rt.sg_label(results).split(" (")[0]),
             ("pod NN", "all", "POD network on sparse-grid data", "POD network"),
             ("paper NN", "biceps", "paper network, biceps only", "paper network (biceps)")):
-        row = _held_out_row(results, surrogate, scope)
+        row = rt.held_out_row(results, surrogate, scope)
         # the deployed network's own row is the deployed row already
-        if row is None or (deployed and surrogate == f"{_deployed_model(results)} NN"):
+        if row is None or (deployed and surrogate == f"{rt.deployed_model(results)} NN"):
             continue
         rows.append(_Accuracy(label, row.get("max MaxAE_mm"), row.get("mean MAE_mm"), row.get("max angle_error_deg"),
                               "evaluate stage (`error_propagation`)", short=short))
@@ -207,21 +81,21 @@ def _accuracy_rows(results: dict) -> list[_Accuracy]:
 
 def _cells(rows: list[_Accuracy], bold: bool = False) -> list[str]:
     """worst MaxAE, mean MAE, worst angle: one value per cell, or ``a / b / c`` for several rows."""
-    cells = [_joined([getattr(r, key) for r in rows], format_mm, unit)
+    cells = [rt.joined([getattr(r, key) for r in rows], rt.format_mm, unit)
              for key, unit in (("max_ae", "mm"), ("mae", "mm"), ("angle", "deg"))]
     return [f"**{c}**" if bold and c else c for c in cells]
 
 
 def _states_words(results: dict) -> str:
-    held = _deployed_held_out(results) or _held_out_row(results, "SG") or {}
+    held = rt.deployed_held_out(results) or rt.held_out_row(results, "SG") or {}
     count = f"{held['states']} " if held.get("states") else ""
-    return f"{count}random held-out {_truth(results)} states"
+    return f"{count}random held-out {rt.truth(results)} states"
 
 
 def _paper_accuracy(results: dict) -> tuple[dict, dict] | None:
     """The paper's SG and network rows of the error-propagation table (persival.evaluate.paper_values)."""
-    paper = _tables(results, "error_propagation")
-    sg, nn = _paper_row(paper, "SG"), _paper_row(paper, "NN")
+    paper = rt.run_tables(results, "error_propagation")
+    sg, nn = rt.paper_row(paper, "SG"), rt.paper_row(paper, "NN")
     return (sg, nn) if sg and nn else None
 
 
@@ -235,60 +109,61 @@ def render_accuracy(results: dict) -> str | None:
     if paper:
         sg, nn = paper
         body.append([f"the paper (its arm, {sg.get('scope')}): sparse grid / network",
-                     _joined([sg.get("max MaxAE_mm"), nn.get("max MaxAE_mm")], format_mm, "mm"),
-                     _joined([sg.get("mean MAE_mm"), nn.get("mean MAE_mm")], format_mm, "mm"), ""])
+                     rt.joined([sg.get("max MaxAE_mm"), nn.get("max MaxAE_mm")], rt.format_mm, "mm"),
+                     rt.joined([sg.get("mean MAE_mm"), nn.get("mean MAE_mm")], rt.format_mm, "mm"), ""])
     header = [f"{_states_words(results)} (all muscles unless said)", "worst MaxAE", "mean MAE", "worst elbow-angle error"]
-    return _table(header, body)
+    return rt.markdown_table(header, body)
 
 
 def _export_label(role: str, arch: str, tiers: list[str]) -> str:
-    return f"{_NAMES.get(arch, arch)} ({'deployed' if role == 'deployed' else '`export_pod/`'}), ONNX {' / '.join(tiers)}"
+    return f"{rt.NAMES.get(arch, arch)} ({'deployed' if role == 'deployed' else '`export_pod/`'}), ONNX {' / '.join(tiers)}"
 
 
 def _tier_values(results, role, arch, tiers, key: str, threads: int = 1, batch: int = 1) -> list:
     """``key`` of each tier's bench row (None where the bench has no such row)."""
-    return [r and r.get(key) for r in _tier_rows(results, role, arch, tiers, threads, batch)]
+    return [r and r.get(key) for r in rt.tier_rows(results, role, arch, tiers, threads, batch)]
 
 
 def _speed_row(results, role, arch, tiers) -> list[str]:
     """Batch 1 on one thread (and per state at batch 64), the files, for one export's tiers."""
-    time = _joined(_tier_values(results, role, arch, tiers, "ms_per_state"), format_ms, "ms")
-    batch = _joined(_tier_values(results, role, arch, tiers, "ms_per_state", batch=64), format_ms, "ms")
+    time = rt.joined(_tier_values(results, role, arch, tiers, "ms_per_state"), rt.format_ms, "ms")
+    batch = rt.joined(_tier_values(results, role, arch, tiers, "ms_per_state", batch=64), rt.format_ms, "ms")
     time += f" ({batch} per state at batch 64)" if batch else ""
-    return [_export_label(role, arch, tiers), time, _joined(_tier_values(results, role, arch, tiers, "file_mb"), format_mb, "MB")]
+    return [_export_label(role, arch, tiers), time, rt.joined(_tier_values(results, role, arch, tiers, "file_mb"),
+                            rt.format_mb, "MB")]
 
 
 def _paper_speed_row(results: dict) -> list[str] | None:
-    torch_ = _bench(results, lambda r: r.get("variant") == "paper arch 5->2809, combined"
+    torch_ = rt.bench_row(results, lambda r: r.get("variant") == "paper arch 5->2809, combined"
                     and str(r.get("runtime")).startswith("PyTorch"))
-    figure = next((r for r in _tables(results, "bench_nn").get("paper", []) if r.get("runtime") == "TFLite (paper)"), None)
+    figure = next((r for r in rt.run_tables(results, "bench_nn").get("paper", []) if r.get("runtime") == "TFLite (paper)"), None)
     if torch_ is None:
         return None
     label, times = "the paper's network rebuilt (PyTorch)", [torch_.get("ms_per_state")]
     if figure:
         label, times = label + " / the paper's TFLite figure", times + [figure.get("ms_per_call")]
-    return [label, " / ".join(f"{format_ms(t)} ms" for t in times), _joined([torch_.get("file_mb")], format_mb, "MB")]
+    return [label, " / ".join(f"{rt.format_ms(t)} ms" for t in times), rt.joined([torch_.get("file_mb")], rt.format_mb, "MB")]
 
 
 def render_speed(results: dict) -> str | None:
     """README: time per state and file size of every exported model, the SG and the paper's network."""
-    exports = _exports(results)
+    exports = rt.exports(results)
     if not exports:
         return None
     rows = [_speed_row(results, role, arch, tiers)
             for (role, arch), tiers in sorted(exports.items(), key=lambda item: item[0][0] != "deployed")]
-    sg = _bench(results, lambda r: str(r.get("variant")).startswith("SG level"))
+    sg = rt.bench_row(results, lambda r: str(r.get("variant")).startswith("SG level"))
     if sg:
         rows.append([f"sparse grid, whole surface ({sg.get('runtime', 'numpy').split()[0]})",
-                     _joined([sg.get("ms_per_state")], format_ms, "ms"), _joined([sg.get("file_mb")], format_mb, "MB")])
+                     rt.joined([sg.get("ms_per_state")], rt.format_ms, "ms"), rt.joined([sg.get("file_mb")], rt.format_mb, "MB")])
     paper = _paper_speed_row(results)
     rows += [paper] if paper else []
-    return _table(["speed and size (onnxruntime, 1 thread, batch 1)", "time per state", "file"], rows)
+    return rt.markdown_table(["speed and size (onnxruntime, 1 thread, batch 1)", "time per state", "file"], rows)
 
 
 def _model_words(results: dict) -> str | None:
     """"quick profile: 6529 tet10, 5 muscles with 8030 surface nodes, biceps 2478" from the model stage."""
-    summary = _stage(results, "model").get("summary") or {}
+    summary = rt.stage_record(results, "model").get("summary") or {}
     muscles = summary.get("muscles") or {}
     if not muscles:
         return None
@@ -304,20 +179,20 @@ def _stage_words(results: dict) -> str | None:
              if name != "run" and isinstance(record, dict) and "wall_time_s" in record}
     if not times:
         return None
-    words = [f"{_minutes(sum(times.values()))} in its stages"]
-    tables = _stage(results, "tables").get("summary") or {}
+    words = [f"{rt.minutes(sum(times.values()))} in its stages"]
+    tables = rt.stage_record(results, "tables").get("summary") or {}
     if "tables" in times and not tables.get("skipped"):
-        muscles = len((_stage(results, "model").get("summary") or {}).get("muscles") or {})
+        muscles = len((rt.stage_record(results, "model").get("summary") or {}).get("muscles") or {})
         shape = (f" ({len(tables['levels']) * muscles} columns of {len(tables['angles_deg'])} angles, once per model)"
                  if muscles and tables.get("levels") and tables.get("angles_deg") else "")
-        words.append(f"{_minutes(times['tables'])} of it the response tables{shape}")
-    words += [f"{what} {_minutes(times[name])}" for name, what in (("campaign", "the campaign"), ("train", "training"))
+        words.append(f"{rt.minutes(times['tables'])} of it the response tables{shape}")
+    words += [f"{what} {rt.minutes(times[name])}" for name, what in (("campaign", "the campaign"), ("train", "training"))
               if name in times]
     return ", ".join(words)
 
 
 def _fe_words(results: dict) -> str | None:
-    states = (_stage(results, "fe").get("summary") or {}).get("states") or {}
+    states = (rt.stage_record(results, "fe").get("summary") or {}).get("states") or {}
     names = (("hanging", "Hanging arm"), ("biceps_half", "biceps 0.5"), ("flexors_full", "flexors 1"))
     words = [f"{what} {states[name]['elbow_angle_deg']:.2f} deg" for name, what in names if name in states]
     return ", ".join(words) + "." if words else None
@@ -328,18 +203,18 @@ def render_run(results: dict) -> str | None:
     stages = _stage_words(results)
     if stages is None:
         return None
-    fe_arm = _truth(results) == "FE"
+    fe_arm = rt.truth(results) == "FE"
     # the model stage meshes the arm in every run, but only an FE run's numbers are of that mesh
     model = _model_words(results) if fe_arm else None
-    arm = "our FE arm" if fe_arm else f"the {_truth(results)} stand-in (no FE states)"
-    text = (f"The paper's tables on {arm}, from `{_command(results)}`" + (f" ({model})" if model else "")
-            + f", {_measured(results)}: {stages}.")
+    arm = "our FE arm" if fe_arm else f"the {rt.truth(results)} stand-in (no FE states)"
+    text = (f"The paper's tables on {arm}, from `{rt.command(results)}`" + (f" ({model})" if model else "")
+            + f", {rt.measured(results)}: {stages}.")
     fe = _fe_words(results)
-    return _paragraph(text + (" " + fe if fe else ""))
+    return rt.paragraph(text + (" " + fe if fe else ""))
 
 
 def _out_of_training(results: dict, kind: str) -> tuple[dict, dict] | None:
-    table = _tables(results, kind)
+    table = rt.run_tables(results, kind)
     ours = next((r for r in table.get("rows", []) if r.get("network") == "pod" and r.get("scope") == "all"), None)
     paper = (table.get("paper") or [None])[0]
     return (ours, paper) if ours and paper else None
@@ -353,8 +228,8 @@ def render_out_of_training(results: dict) -> str | None:
     (act, paper_act), (ang, paper_ang) = found
 
     def pair(row):
-        return f"{format_mm(row['max MaxAE_mm'])} / {format_mm(row['mean MAE_mm'])}"
-    return _paragraph("Networks against the sparse grid they were trained on (the paper's out-of-training tests): POD "
+        return f"{rt.format_mm(row['max MaxAE_mm'])} / {rt.format_mm(row['mean MAE_mm'])}"
+    return rt.paragraph("Networks against the sparse grid they were trained on (the paper's out-of-training tests): POD "
                       f"network {pair(act)} mm at random activations and {pair(ang)} mm at alpha_opt(Theta) (the paper: "
                       f"{pair(paper_act)} and {pair(paper_ang)} mm).")
 
@@ -374,33 +249,35 @@ def render_bench_accuracy(results: dict) -> str | None:
     figures = ""
     if paper:
         sg, nn = paper
-        figures = (f"The paper's figures (its arm, {sg.get('scope')}): sparse grid {format_mm(sg.get('max MaxAE_mm'))} / "
-                   f"{format_mm(sg.get('mean MAE_mm'))} mm, network {format_mm(nn.get('max MaxAE_mm'))} / "
-                   f"{format_mm(nn.get('mean MAE_mm'))} mm. ")
-    where = f"{_states_words(results)}; from the results.json of `{_command(results)}`: {_measured(results)}."
-    return _table(header, body) + "\n\n" + _paragraph(figures + where)
+        figures = (f"The paper's figures (its arm, {sg.get('scope')}): sparse grid {rt.format_mm(sg.get('max MaxAE_mm'))} / "
+                   f"{rt.format_mm(sg.get('mean MAE_mm'))} mm, network {rt.format_mm(nn.get('max MaxAE_mm'))} / "
+                   f"{rt.format_mm(nn.get('mean MAE_mm'))} mm. ")
+    where = f"{_states_words(results)}; from the results.json of `{rt.command(results)}`: {rt.measured(results)}."
+    return rt.markdown_table(header, body) + "\n\n" + rt.paragraph(figures + where)
 
 
 def _bench_speed_row(results, role, arch, tiers) -> list[str]:
     """Batch 1 and 64 (per state), each on one thread and in brackets on two, and the files."""
     cells = [_export_label(role, arch, tiers)]
     for batch in (1, 64):
-        one = _joined(_tier_values(results, role, arch, tiers, "ms_per_state", 1, batch), format_ms, "ms")
-        two = _joined(_tier_values(results, role, arch, tiers, "ms_per_state", 2, batch), format_ms, "ms")
+        one = rt.joined(_tier_values(results, role, arch, tiers, "ms_per_state", 1, batch), rt.format_ms, "ms")
+        two = rt.joined(_tier_values(results, role, arch, tiers, "ms_per_state", 2, batch), rt.format_ms, "ms")
         one = f"**{one}**" if role == "deployed" and batch == 1 and one else one
         cells.append(one + (f" (2 threads {two})" if two else ""))
-    return cells + [_joined(_tier_values(results, role, arch, tiers, "file_mb"), format_mb, "MB")]
+    return cells + [rt.joined(_tier_values(results, role, arch, tiers, "file_mb"),
+                            rt.format_mb, "MB")]
 
 
 def render_bench_speed(results: dict) -> str | None:
     """docs/benchmarks.md: every exported model at batch 1 and 64, one and two threads, and its files."""
-    exports = _exports(results)
+    exports = rt.exports(results)
     if not exports:
         return None
     rows = [_bench_speed_row(results, role, arch, tiers)
             for (role, arch), tiers in sorted(exports.items(), key=lambda item: item[0][0] != "deployed")]
-    table = _table(["model", "batch 1, 1 thread", "batch 64, per state", "file"], rows)
-    return f"{table}\n\n" + _paragraph(f"From the results.json (`bench_nn`) of `{_command(results)}`: {_measured(results)}.")
+    table = rt.markdown_table(["model", "batch 1, 1 thread", "batch 64, per state", "file"], rows)
+    source = f"From the results.json (`bench_nn`) of `{rt.command(results)}`: {rt.measured(results)}."
+    return f"{table}\n\n" + rt.paragraph(source)
 
 
 #: block name -> renderer(results) -> markdown, or None where results.json lacks the numbers

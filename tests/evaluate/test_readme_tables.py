@@ -20,6 +20,7 @@ from test_report_summary import _run as hand_made_run
 from typer.testing import CliRunner
 
 from persival.evaluate import readme_tables as rt
+from persival.evaluate.results_text import format_mb, format_mm, format_ms
 
 ROOT = Path(__file__).resolve().parents[2]
 COMMITTED = ROOT / "docs" / "results.json"
@@ -67,27 +68,27 @@ def test_the_blocks_carry_the_small_run_s_numbers(small_results):
     # the small run's export states no held-out measurement: the deployed row is the network's table row
     assert "**POD network (deployed, before export)**" in accuracy
     for value in (held["max_ae_mm"], held["mae_mm"], held["max_angle_error_deg"]):
-        assert f"**{rt.format_mm(value)} " in accuracy
+        assert f"**{format_mm(value)} " in accuracy
     for value in (sg["max MaxAE_mm"], sg["mean MAE_mm"], sg["max angle_error_deg"], paper["max MaxAE_mm"]):
-        assert f"{rt.format_mm(value)} " in accuracy
+        assert f"{format_mm(value)} " in accuracy
     assert "17.79 / 18.28 mm" in accuracy and "25 random held-out analytic states" not in accuracy  # 10 states here
     assert f"{held['states']} random held-out analytic states" in accuracy
 
     f32 = _bench(results, "deployed pod ONNX float32")
     for name in ("speed", "bench-speed"):
         block = rt.render(name, results)
-        assert rt.format_ms(f32["ms_per_state"]) in block and rt.format_mb(f32["file_mb"]) in block, name
+        assert format_ms(f32["ms_per_state"]) in block and format_mb(f32["file_mb"]) in block, name
     sg_speed = _bench(results, "SG level 1 (243 points, whole surface)")
-    assert f"{rt.format_ms(sg_speed['ms_per_state'])} ms" in rt.render("speed", results)
-    assert f"{rt.format_ms(_bench(results, 'deployed pod ONNX int8', 2, 64)['ms_per_state'])} ms" in rt.render(
+    assert f"{format_ms(sg_speed['ms_per_state'])} ms" in rt.render("speed", results)
+    assert f"{format_ms(_bench(results, 'deployed pod ONNX int8', 2, 64)['ms_per_state'])} ms" in rt.render(
         "bench-speed", results)
 
     pod = next(r for r in results["tables"]["random_activations"]["rows"] if r["network"] == "pod" and r["scope"] == "all")
     text = " ".join(rt.render("out-of-training", results).split())
-    assert f"{rt.format_mm(pod['max MaxAE_mm'])} / {rt.format_mm(pod['mean MAE_mm'])} mm at random activations" in text
+    assert f"{format_mm(pod['max MaxAE_mm'])} / {format_mm(pod['mean MAE_mm'])} mm at random activations" in text
     assert "(the paper: 11.96 / 2.15 and 3.75 / 0.97 mm)" in text
     bench = " ".join(rt.render("bench-accuracy", results).split())
-    assert f"{rt.format_mm(sg['max MaxAE_mm'])} / {rt.format_mm(paper['max MaxAE_mm'])} mm" in bench
+    assert f"{format_mm(sg['max MaxAE_mm'])} / {format_mm(paper['max MaxAE_mm'])} mm" in bench
     # no stage records in the fixture's run (it is not a `persival run`): the run block keeps its text
     assert rt.render("run", results) is None
 
@@ -124,7 +125,7 @@ def test_a_rewrite_touches_only_the_blocks_and_is_idempotent(hand_made_results, 
     assert status == {"accuracy": "changed", "speed": "changed", "out-of-training": "no numbers"}
     once = doc.read_text()
     assert _outside(once) == _outside(before) and "written by hand, kept" in once
-    assert f"**{rt.format_mm(30.1)} mm**" in once and f"{rt.format_ms(0.037)} ms" in once
+    assert f"**{format_mm(30.1)} mm**" in once and f"{format_ms(0.037)} ms" in once
     assert rt.rewrite_file(doc, results) == {"accuracy": "unchanged", "speed": "unchanged", "out-of-training": "no numbers"}
     assert doc.read_text() == once
 
