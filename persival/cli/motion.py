@@ -47,7 +47,8 @@ def _build_motion(table: Path, out: Path, model: Path | None, angles: str, loads
     from rich.console import Console
 
     from persival.model.arm.model_file import load_model_file
-    from persival.surrogate.motion_model import MotionActivationModel, plot_motion_model
+    from persival.surrogate.motion_model import MotionActivationModel
+    from persival.surrogate.motion_plot import plot_motion_model
     from persival.tables.moment_table import MomentTable
 
     with user_errors(out=out):

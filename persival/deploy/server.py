@@ -3,6 +3,7 @@
 `create_app(artifacts_dir)` returns a FastAPI app (`persival serve` runs it with uvicorn):
 
 - ``GET /health``, ``POST /api/predict`` and the WebSocket ``/ws`` (requests: protocol.py);
+- the WebSocket ``/ws/tracker``, a relay from a motion tracker to the pages (tracker_relay.py);
 - ``GET /`` and the built viewer's files (persival/deploy/web/dist), ``GET /artifacts/<file>``.
 
 Files are served from an allowlist made at start-up (every file of the built viewer, and the
@@ -23,13 +24,17 @@ from fastapi.responses import FileResponse, JSONResponse
 from persival.deploy import protocol
 from persival.deploy.artifacts import DeployedModel
 from persival.deploy.protocol import RequestError, TokenBucket
+from persival.deploy.tracker_relay import add_tracker_relay
 
 __all__ = ["create_app", "WEB_DIST", "ServerLimits"]
 
 WEB_DIST = Path(__file__).resolve().parent / "web" / "dist"
 _TYPES = {".wasm": "application/wasm", ".mjs": "text/javascript", ".js": "text/javascript",
           ".onnx": "application/octet-stream", ".json": "application/json", ".html": "text/html",
-          ".css": "text/css", ".png": "image/png", ".svg": "image/svg+xml", ".map": "application/json"}
+          ".css": "text/css", ".png": "image/png", ".svg": "image/svg+xml", ".map": "application/json",
+          # the pose tracker's model and graph files (dist/mediapipe/)
+          ".tflite": "application/octet-stream", ".binarypb": "application/octet-stream",
+          ".data": "application/octet-stream"}
 # Same-origin everything; 'wasm-unsafe-eval' lets onnxruntime-web compile its WebAssembly.
 _HEADERS = {
     "X-Content-Type-Options": "nosniff",
@@ -183,5 +188,6 @@ def create_app(artifacts_dir: str | Path, web_dir: str | Path | None = WEB_DIST,
         return _error(500, f"internal error: {type(exc).__name__}")
 
     _add_socket(app, model, limits)
+    add_tracker_relay(app)
     _add_http_routes(app, model, limits, _allowlist(model, Path(web_dir) if web_dir else None))
     return app

@@ -79,7 +79,8 @@ def motion(out: Path, config, console) -> dict:
     """The motion model solves least effort on the deployed model's own moment balance (the
     structured model's, fitted to the tables); a run without it (the analytic stand-in) needs a
     moment table of an arm (--moment-table)."""
-    from persival.surrogate.motion_model import MotionActivationModel, plot_motion_model
+    from persival.surrogate.motion_model import MotionActivationModel
+    from persival.surrogate.motion_plot import plot_motion_model
 
     if (out / "structured" / "surrogate.json").is_file():
         from persival.surrogate.open import load_surrogate

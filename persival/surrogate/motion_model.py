@@ -31,9 +31,10 @@ import numpy as np
 
 from persival.onnx_io import export_graph, onnx_session
 from persival.surrogate.activation_model import check_angles
+from persival.surrogate.least_effort import least_effort
 from persival.vocabulary import MUSCLES
 
-__all__ = ["MotionActivationModel", "least_effort", "plot_motion_model", "WINTER_GYRATION_RATIO"]
+__all__ = ["MotionActivationModel", "RestAngleModel", "WINTER_GYRATION_RATIO"]
 
 WINTER_GYRATION_RATIO = 0.827 / 0.682  # radius of gyration about the elbow / centre-of-mass distance
 _ONNX_NAME = "activation_motion.onnx"
@@ -41,59 +42,6 @@ _ANGLE_ONNX_NAME = "activation_angle.onnx"
 #: activations at which each muscle's moment is sampled for the least-effort solve (docs/theory.md, 6.4)
 ACTIVATION_SAMPLES = 65
 SOLVE_STRIDE = 4  # the least-effort table is solved on samples 0, 4, ..., 64 (17 chords)
-
-
-def _response(V, levels, lam):
-    """Per-muscle argmin over [0, 1] of a^2 - lam M(a), M piecewise linear through the levels.
-
-    V: (n, 5, J) moments at the levels. Each segment's quadratic has its minimum at the clipped
-    stationary point lam s / 2; the muscle's minimum is the best segment (exact, also where M is
-    not concave). Returns activations (n, 5) and moments (n, 5).
-    """
-    a0, a1 = levels[:-1], levels[1:]
-    slope = np.diff(V, axis=2) / np.diff(levels)
-    cand = np.clip(lam[:, None, None] * slope / 2.0, a0, a1)
-    moment = V[:, :, :-1] + slope * (cand - a0)
-    k = np.argmin(cand**2 - lam[:, None, None] * moment, axis=2)[:, :, None]
-    return np.take_along_axis(cand, k, 2)[:, :, 0], np.take_along_axis(moment, k, 2)[:, :, 0]
-
-
-def _moments_at(V, levels, a):
-    """sum_m M_m(a_m) for activations a (n, 5), linear between the levels."""
-    j = np.clip(np.searchsorted(levels, a, side="right") - 1, 0, len(levels) - 2)
-    a0, a1 = levels[j], levels[j + 1]
-    v0, v1 = np.take_along_axis(V, j[:, :, None], 2)[..., 0], np.take_along_axis(V, j[:, :, None] + 1, 2)[..., 0]
-    return (v0 + (v1 - v0) * (a - a0) / (a1 - a0)).sum(axis=1)
-
-
-def least_effort(V, levels, required, iterations: int = 90):
-    """min sum a^2 s.t. sum_m M_m(a_m) = required, a in [0, 1]^5, vectorized (docs/theory.md, 6.4).
-
-    Dual bisection on the multiplier lam (the per-muscle response is monotone in lam), then a
-    bisection along the segment between the two last responses, which closes any duality gap
-    left where a muscle's moment is not concave in a. Returns activations (n, 5) and feasible (n,):
-    required in [sum_m min_a M_m, sum_m max_a M_m]; infeasible rows get the saturated best effort.
-    """
-    V, levels, R = np.asarray(V, float), np.asarray(levels, float), np.asarray(required, float)
-    passive = V[:, :, 0].sum(axis=1)
-    sign = np.where(R >= passive, 1.0, -1.0)
-    lo, hi = np.full(len(R), -25.0), np.full(len(R), 25.0)  # lam = sign exp(t)
-    for _ in range(iterations):
-        t = 0.5 * (lo + hi)
-        _, M = _response(V, levels, sign * np.exp(t))
-        short = sign * (M.sum(axis=1) - R) < 0
-        lo, hi = np.where(short, t, lo), np.where(short, hi, t)
-    a_lo = _response(V, levels, sign * np.exp(lo))[0]
-    a_hi = _response(V, levels, sign * np.exp(hi))[0]
-    a_lo = np.where((sign * (passive - R) >= 0)[:, None], 0.0, a_lo)  # exactly at the passive moment
-    w_lo, w_hi = np.zeros(len(R)), np.ones(len(R))
-    for _ in range(50):
-        w = 0.5 * (w_lo + w_hi)
-        short = sign * (_moments_at(V, levels, a_lo + w[:, None] * (a_hi - a_lo)) - R) < 0
-        w_lo, w_hi = np.where(short, w, w_lo), np.where(short, w_hi, w)
-    a = a_lo + w_hi[:, None] * (a_hi - a_lo)
-    feasible = (R >= V.min(axis=2).sum(axis=1) - 1e-9) & (R <= V.max(axis=2).sum(axis=1) + 1e-9)
-    return a, feasible
 
 
 class MotionActivationModel:
@@ -407,40 +355,3 @@ class RestAngleModel:
                 return self.motion(torch.cat([theta, zeros, zeros, zeros], dim=1))[0]
 
         return AtRest()
-
-
-def plot_motion_model(model: MotionActivationModel, path: str | Path, loads=(0.0, 1.0, 2.0, 5.0)) -> Path:
-    """Activations against Theta for a few loads (zero velocity and acceleration); dotted where
-    the load cannot be held (the saturated best effort); last panel: required vs reachable moment."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from persival.figures import save_figure
-
-    theta = np.linspace(*model.range_deg, 321)
-    fig, axes = plt.subplots(2, 3, figsize=(13, 7), sharex=True)
-    for k, load in enumerate(loads):
-        motion = np.column_stack([theta, 0 * theta, 0 * theta, np.full_like(theta, load)])
-        a, ok = model.predict(motion)
-        colour = f"C{k}"
-        for m, ax in enumerate(axes.flat[:5]):
-            ax.plot(theta, np.where(ok, a[:, m], np.nan), color=colour, label=f"{load:g} kg")
-            ax.plot(theta, np.where(ok, np.nan, a[:, m]), color=colour, ls=":")
-        axes.flat[5].plot(theta, model.required_moment(motion) / 1e3, color=colour, label=f"required, {load:g} kg")
-    for m, ax in enumerate(axes.flat[:5]):
-        ax.set(title=MUSCLES[m], ylim=(-0.03, 1.03))
-        ax.grid(alpha=0.3)
-    axes.flat[5].plot(model.theta, model.m_max / 1e3, "k-", label="max muscle moment")
-    axes.flat[5].plot(model.theta, model.m_min / 1e3, "k--", label="min muscle moment")
-    axes.flat[5].set(title="moment about the elbow (N m)")
-    axes.flat[5].grid(alpha=0.3)
-    axes.flat[5].legend(fontsize=7)
-    axes.flat[0].legend(fontsize=8)
-    for ax in axes[1]:
-        ax.set_xlabel("elbow angle (deg), zero velocity and acceleration")
-    fig.suptitle(f"least-effort activations (sum of a^2), loads at {model.params['hand_distance_mm']:.0f} mm; "
-                 "dotted: the load cannot be held")
-    fig.tight_layout()
-    return save_figure(fig, path, dpi=110)

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from persival.surrogate.motion_model import MotionActivationModel, _moments_at, least_effort
+from persival.surrogate.least_effort import _moments_at, least_effort
+from persival.surrogate.motion_model import MotionActivationModel
 from persival.tables.moment_table import MomentTable
 from persival.vocabulary import MUSCLES
 

@@ -59,6 +59,7 @@ export function setupControls(v) {
   async function openRecording(text, name, column = null) {
     try {
       if (v.playing) play(false);
+      if (v.liveOn) await v.liveUi.select('off'); // a recording and a live source share the graphs
       const summary = await v.player.open(text, name, column);
       $('recording-note').textContent = `${summary.file}: ${summary.frames} frames, ${summary.duration.toFixed(1)} s ` +
         `(${summary.column}); ${summary.framesClamped} clamped to ${v.range[0].toFixed(0)}-${v.range[1].toFixed(0)}°` +

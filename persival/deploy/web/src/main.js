@@ -13,6 +13,11 @@
 // the export's `load_variant` (deformation_load.onnx, the load a required input: see inference.js).
 // The drawn state's elbow angle is the "achieved" angle; a load the muscles cannot hold at an
 // angle is refused.
+//
+// A live source (the user's own elbow from a webcam or a tracker: live/) drives the arm whenever
+// it is on: each new sample's angle, velocity and acceleration and the load go through the motion
+// model as a recording's frames do, the drawn state as setAngle's; an exercise (exercise.js) adds
+// a ghost arm at its target and per-repetition feedback.
 import { ArmScene } from './scene.js';
 import { LocalEngine, ServerEngine, configureOrt } from './inference.js';
 import { calibrate, choose, Monitor, INFERENCE_BUDGET_MS } from './auto.js';
@@ -21,6 +26,11 @@ import { setupControls } from './controls.js';
 import { Graphs } from './graphs.js';
 import { Holdable, refusal } from './load.js';
 import { RecordingPlayer } from './player.js';
+import { GhostArm } from './ghost.js';
+import { LiveInput } from './live/live_input.js';
+import { LiveGraphs } from './live/live_graphs.js';
+import { setupLive } from './live/live_panel.js';
+import { setupExercise } from './exercise_panel.js';
 import * as ui from './ui.js';
 
 const PLAY_PERIOD_S = 4;
@@ -54,8 +64,13 @@ class Viewer {
     this.holdable = this.hasMotion && this.hasAngleModel ? await Holdable.build(this.local, this.meta, this.range) : null;
     this.graphs = new Graphs(document.getElementById('graphs'), this.meta.muscles);
     this.player = new RecordingPlayer(this);
+    this.live = new LiveInput(this, () => {});
+    this.liveGraphs = new LiveGraphs(document.getElementById('graphs'), this.range);
+    this.ghost = new GhostArm(this.scene);
     await this.scaleLegend();
     this.controls = setupControls(this);
+    this.liveUi = setupLive(this);
+    this.exerciseUi = setupExercise(this);
     await this.runAuto();
     this.touch();
     this.scene.renderer.setAnimationLoop((t) => this.tick(t));
@@ -220,9 +235,68 @@ class Viewer {
     return this.local.motionBatch(angles.map((a, k) => [a, 0, 0, loads[k]]));
   }
 
+  // A live source takes over the arm (live/live_panel.js calls these).
+  startLive(source) {
+    this.player.stop();
+    if (this.playing) this.controls.play(false);
+    this.graphs.hide();
+    this.live.begin(source);
+    this.liveOn = true;
+    this.liveCache = null;
+    this.liveGraphs.clear();
+    this.liveGraphs.show();
+    this.scene.bottomInset = this.liveGraphs.canvas.parentElement.offsetHeight;
+    this.scene.resize();
+  }
+
+  stopLive() {
+    if (!this.liveOn) return;
+    if (this.exerciseUi?.running()) this.exerciseUi.finish();
+    this.liveOn = false;
+    this.live.end();
+    this.state.driver = 'angle'; // the arm stays at the last live angle
+    this.liveGraphs.hide();
+    this.scene.bottomInset = 0;
+    this.scene.resize();
+    this.touch();
+  }
+
+  // The load in the hand while the user moves: checked by the caller over the whole movement (an
+  // exercise's range), not at the current angle.
+  setLiveLoad(kg) {
+    this.state.load = kg;
+    document.getElementById('load').value = String(kg);
+    document.getElementById('load-out').value = `${kg.toFixed(1)} kg`;
+    this.liveCache = null;
+  }
+
+  // The newest live sample's state: the motion model's effort (and whether the muscles hold it)
+  // for its angle, velocity, acceleration and the load; the drawn arm's activations for its angle.
+  async liveState() {
+    const s = this.live.sample, load = this.state.load;
+    if (this.liveCache?.seq !== s.seq || this.liveCache.load !== load) {
+      let effort = null, deficit = null;
+      if (this.hasMotion) ({ activations: effort, deficit } = await this.local.motionWithDeficit([[s.target, s.velocity, s.acceleration, load]]));
+      const drawn = await this.drawnFor([s.target], [load]);
+      this.liveCache = { seq: s.seq, load, drawn, effort: effort ?? drawn, notHeld: Boolean(deficit && deficit[0] !== 0) };
+    }
+    this.state.angle = s.target;
+    const c = this.liveCache;
+    return { drawn: c.drawn, effort: c.effort, load, live: s, notHeld: c.notHeld };
+  }
+
+  // A live state reached the screen (the frame that ended at `now`).
+  liveDrawn({ sample, achieved, effort, notHeld }, now) {
+    this.live.drawn(sample, achieved, now);
+    const t = sample.arrived / 1000;
+    this.liveGraphs.add({ t, effort, angle: sample.angle, achieved, target: this.exerciseUi.target(sample.arrived) ?? NaN, notHeld });
+    this.exerciseUi.drawn(sample, effort, notHeld);
+  }
+
   // {drawn, effort, load, k?, target?} for the state to draw now.
   async activationsForState() {
     const s = this.state;
+    if (this.liveOn && this.live.sample) return this.liveState();
     if (this.player.playing) {
       const frame = this.player.frame(performance.now());
       s.angle = frame.target;
@@ -285,11 +359,12 @@ class Viewer {
     this.scene.setElbowAngle(angle);
     this.elbowAngle = angle;
     if (next.k !== undefined) this.player.record(next.k, angle, next.target);
+    if (next.live) this.pendingLive = { sample: next.live, achieved: angle, effort: Float32Array.from(next.effort), notHeld: next.notHeld };
     this.states++;
     this.applied = serial;
     // the panel's numbers at most every 100 ms: each change is a layout, paint and raster of the panel
     const now = performance.now();
-    if (!(this.playing || this.player.playing) || now - (this.shownAt || 0) > 100) {
+    if (!(this.playing || this.player.playing || this.liveOn) || now - (this.shownAt || 0) > 100) {
       this.shownAt = now;
       this.controls.show(this.effort, angle);
     }
@@ -314,11 +389,16 @@ class Viewer {
     // a new resolution before drawing: resizing clears the canvas, and a frame drawn before the
     // resize would be shown blank
     if ((this.scaleAt || 0) < now - 500 && this.frames.length > 10) { this.scaleAt = now; this.scene.adaptResolution(this.fps); }
+    this.exerciseUi.tick(now);
+    const fresh = this.pendingLive; // set by a finished infer(): drawn by this render
+    this.pendingLive = null;
     const tr = performance.now();
     this.scene.render();
     this.prof.renderMs += performance.now() - tr;
+    if (fresh) this.liveDrawn(fresh, performance.now());
+    if (this.liveOn) this.liveGraphs.draw(now);
     this.waiters = this.waiters.filter((w) => (this.applied >= w.serial && !this.busy ? (w.resolve(), false) : true));
-    if ((this.hudAt || 0) < now - 250) { this.hudAt = now; this.hud(this.stats()); this.controls.showLoad(); }
+    if ((this.hudAt || 0) < now - 250) { this.hudAt = now; this.hud(this.stats()); this.controls.showLoad(); this.liveUi.show(); }
     this.prof.frames++;
     this.prof.tickMs += performance.now() - tickStart;
   }
@@ -334,7 +414,15 @@ class Viewer {
       states: this.states, renderScale: this.scene.renderScale, elbowAngle: this.elbowAngle, playing: Boolean(this.playing),
       angle: this.state.angle, load: this.state.load, held: this.held(this.state.angle), effort: Array.from(this.effort),
       colours: this.scene.buffers.activations ? 'activation' : 'displacement', legendMm: this.scene.buffers.scaleMm,
-      playSpan: this.table?.span ?? null, recording: this.player.summary(), viewAlongHinge: this.scene.viewAlongHinge() };
+      playSpan: this.table?.span ?? null, recording: this.player.summary(), viewAlongHinge: this.scene.viewAlongHinge(),
+      live: this.liveStats() };
+  }
+
+  liveStats() {
+    const live = this.live;
+    return { on: Boolean(this.liveOn), source: this.liveUi?.mode() ?? 'off', sample: live.sample, counts: { ...live.counts },
+      latency: live.latency(), message: document.getElementById('live-note').textContent, drawnSamples: live.log.length,
+      exercise: this.exerciseUi?.running() ?? false, ghost: this.ghost.group.visible ? this.exerciseUi.target(performance.now()) : null };
   }
 }
 
@@ -365,6 +453,13 @@ window.persival = {
   setColourMode: (activation) => viewer.setColourMode(activation),
   setBackend: (mode, tier) => { viewer.setMode(mode, tier); return viewer.rendered(); },
   play: (on) => viewer.controls.play(on),
+  // live input and the exercise (tests, and pages embedding the viewer)
+  live: (source) => viewer.liveUi.select(source),
+  liveLog: () => viewer.live.log,
+  webcam: () => { const w = viewer.liveUi.source(); return w?.history ? { counts: { ...w.counts }, last: w.last, history: w.history } : null; },
+  startExercise: () => viewer.exerciseUi.start(),
+  finishExercise: () => viewer.exerciseUi.finish(),
+  exerciseResult: () => viewer.exerciseResult ?? null,
   stats: () => viewer.stats(),
   profile: (reset = false) => { const p = viewer.profile(); if (reset) viewer.resetProfile(); return p; },
 };

@@ -14,6 +14,18 @@ export class RecordingPlayer {
   }
 
   async open(text, name, column = null) {
+    this.rec = await this.analyse(text, name, column);
+    this.v.graphs.show(this.rec);
+    this.v.scene.bottomInset = this.v.graphs.canvas.parentElement.offsetHeight;
+    this.v.scene.resize();
+    this.start();
+    return this.summary();
+  }
+
+  // A movement read and prepared as `persival motion play` does, with every frame's activations
+  // (effort and drawn), without playing it: what open() plays, and what an exercise's summary
+  // reports.
+  async analyse(text, name, column = null) {
     const v = this.v;
     if (!v.hasAngleModel) throw new Error('this export has no activation model (activation_angle.onnx): it cannot play a movement');
     const parsed = parseRecording(text, name, column);
@@ -33,12 +45,7 @@ export class RecordingPlayer {
     rec.framesNotHeld = rec.notHeld.filter(Boolean).length;
     rec.achieved = new Float64Array(n).fill(NaN);
     Object.assign(rec, { range: v.range, file: name, column: parsed.column });
-    this.rec = rec;
-    v.graphs.show(rec);
-    v.scene.bottomInset = v.graphs.canvas.parentElement.offsetHeight;
-    v.scene.resize();
-    this.start();
-    return this.summary();
+    return rec;
   }
 
   start() {
