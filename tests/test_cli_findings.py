@@ -11,9 +11,10 @@ import typer
 from rich.console import Console
 from typer.testing import CliRunner
 
+from persival.cli.show import to_rich
 from persival.evaluate import paper_values
 from persival.evaluate.bench_nn import BENCH_COLUMNS, TERMINAL_COLUMNS
-from persival.evaluate.tables import make_table, to_rich
+from persival.evaluate.tables import make_table
 
 
 @pytest.mark.slow
@@ -48,7 +49,7 @@ def test_the_tflite_hint_prints_the_extra_literally(monkeypatch):
 
     monkeypatch.setattr(tflite_peer, "peer_available", lambda: False)
     console = Console(record=True, width=200)
-    rows, info = bench_nn._peer_rows("relu", 10, 0.1, console)
+    rows, info = bench_nn._peer_rows("relu", 10, 0.1, lambda text: console.print(text, markup=False))
     assert rows == [] and not info["installed"]
     assert "pip install -e '.[peer]'" in console.export_text(clear=False)
     # a cell of a table printed with rich is text, not markup

@@ -47,6 +47,8 @@ CHECKS = {
                  "the server answers what the exported network computes"),
     "train_export.py": ("ONNX vs PyTorch", lambda x: 0.0 <= x < 1e-3,
                         "the float32 ONNX tier is the trained network"),
+    "tracker_client.py": ("largest quaternion angle error", lambda x: 0.0 <= x < 1e-3,
+                          "the angle between the segments' axes is the elbow angle sent, whatever the forearm's twist"),
     "simulate_state.py": ("elbow angle", lambda x: 115.0 < x < 132.0,
                           "the biceps at half activation flexes the arm from 32 deg to about 124 deg"),
 }

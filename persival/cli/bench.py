@@ -29,7 +29,8 @@ def bench_fe(
     backend: str = typer.Option("auto", help="Sparse solver: auto, pardiso or scipy."),
 ) -> None:
     """Newton iteration vs sparse factorization on the paper-size spindle (target ratio <= 1.5)."""
-    from persival.evaluate.bench_fe import print_fe_benchmark, run_fe_benchmark
+    from persival.cli.show import print_fe_benchmark
+    from persival.evaluate.bench_fe import run_fe_benchmark
     from persival.model.fe.linear_solver import SparseSymmetricSolver
 
     with user_errors(RuntimeError):  # RuntimeError: pardiso asked for but not installed
@@ -52,7 +53,8 @@ def bench_arm(
 
     from rich.console import Console
 
-    from persival.evaluate.bench_arm import print_arm_benchmark, run_arm_benchmark
+    from persival.cli.show import print_arm_benchmark
+    from persival.evaluate.bench_arm import run_arm_benchmark
     from persival.model.arm.model_file import load_model_file
 
     with user_errors():
@@ -78,7 +80,8 @@ def bench_deployed(
     """Every surrogate of a run against N more exact FE states (a resumable store under RUN/bench/)."""
     import json
 
-    from persival.evaluate.bench_deployed import print_deployed_benchmark, run_deployed_benchmark
+    from persival.cli.show import print_deployed_benchmark
+    from persival.evaluate.bench_deployed import run_deployed_benchmark
 
     with user_errors():
         result = run_deployed_benchmark(run, states, seed)
@@ -98,11 +101,12 @@ def bench_sg(
     reps: int = typer.Option(300, min=1, help="Repetitions at batch 1 (after warmup)."),
 ) -> None:
     """Seconds per whole-surface state of the sparse-grid surrogate, batch 1 and large batch."""
-    from persival.evaluate.bench_sparse_grid import print_benchmark, run_benchmark
+    from persival.cli.show import print_sg_benchmark
+    from persival.evaluate.bench_sparse_grid import run_benchmark
 
     with user_errors():
         result = run_benchmark(dim=dim, level=level, degree=degree, n_out=n_out, batch=batch, reps_single=reps)
-    print_benchmark(result)
+    print_sg_benchmark(result)
 
 
 def bench_nn(
@@ -115,10 +119,10 @@ def bench_nn(
     from rich.console import Console
 
     from persival.campaign.store import StoreError
+    from persival.cli.show import to_rich
     from persival.evaluate.bench_nn import TERMINAL_COLUMNS
     from persival.evaluate.evaluation import run_bench
     from persival.evaluate.run_layout import RunLayout
-    from persival.evaluate.tables import to_rich
 
     console = Console()
     layout = RunLayout(run)

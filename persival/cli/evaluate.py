@@ -79,9 +79,9 @@ def evaluate(
     from rich.console import Console
 
     from persival.campaign.store import StoreError
+    from persival.cli.show import to_rich
     from persival.evaluate.evaluation import evaluate_run
     from persival.evaluate.run_layout import RunLayout
-    from persival.evaluate.tables import to_rich
 
     console = Console()
     layout = RunLayout(run)

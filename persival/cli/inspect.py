@@ -127,7 +127,8 @@ def anatomy(
     from rich.progress import Progress
 
     from persival.campaign.store import StoreError
-    from persival.evaluate.anatomy import check_outlines_table, check_state_dirs, check_store, print_tables, write_json
+    from persival.cli.show import check_outlines_table, print_anatomy_tables
+    from persival.evaluate.anatomy import check_state_dirs, check_store, write_json
 
     console = Console()
     with user_errors(StoreError, out=out):
@@ -139,8 +140,8 @@ def anatomy(
             check_outlines_table(console, model, out)
             return
         if run is not None:
+            from persival.cli.show import to_rich
             from persival.evaluate.anatomy_run import measure_run
-            from persival.evaluate.tables import to_rich
 
             table = measure_run(run, model)
             console.print(to_rich(table))
@@ -155,7 +156,7 @@ def anatomy(
             results = check_state_dirs(states, model, attachment)
         if not results:
             raise ValueError(f"{store}: no finished states to measure")
-        print_tables(console, results)
+        print_anatomy_tables(console, results)
         if out is not None:
             write_json(results, out, str(store) if store is not None else ", ".join(map(str, states)), attachment)
             console.print(f"wrote {out}")

@@ -23,7 +23,7 @@ from persival.model.arm.output import bone_surfaces
 from persival.model.fe.mesh import Tet10Mesh
 from persival.vocabulary import MUSCLES
 
-__all__ = ["check_outlines_table", "check_state_dirs", "check_store", "pair_limit_mm", "print_tables", "worst_cases",
+__all__ = ["check_state_dirs", "check_store", "pair_limit_mm", "worst_cases",
            "write_json", "MUSCLE_BONE_LIMIT_MM", "MUSCLE_MUSCLE_LIMIT_MM"]
 
 # docs/design/arm_model_record.md: in any state, penetration muscle-bone <= 1 mm and muscle-muscle <= 2 mm
@@ -146,82 +146,3 @@ def write_json(results: list[dict], out: Path, source: str, attachment_mm: float
                                "states": results}, indent=1))
 
 
-def _cell(depth: float, limit: float | None, text: str) -> str:
-    return f"[red]{text}[/red]" if limit is not None and depth > limit else text
-
-
-def print_tables(console, results: list[dict], per_state_columns: int = 5) -> None:
-    """The overlap and bed-gap tables: one column per state when there are few, else the worst state."""
-    from rich.table import Table
-
-    worst = worst_cases(results)
-    few = len(results) <= per_state_columns
-    table = Table(title=f"surface nodes of a body inside another ({len(results)} states; nodes within the attachment "
-                        "distance of a muscle's ends left out; red: beyond the limit)")
-    for column in ("body", "inside", "limit (mm)"):
-        table.add_column(column)
-    if few:
-        for state in results:
-            table.add_column(f"{state['state']}\n{state['elbow_angle_deg']:.0f} deg\nnodes, deepest", justify="right")
-    else:
-        for column in ("states", "most nodes", "deepest (mm)", "in state"):
-            table.add_column(column, justify="right")
-    for entry in worst["overlaps"]:
-        a, b, limit = entry["body"], entry["inside"], entry["limit_mm"]
-        row = [a, b, "-" if limit is None else f"{limit:g}"]
-        if few:
-            for state in results:
-                hit = next((r for r in state["overlaps"] if (r["body"], r["inside"]) == (a, b)), None)
-                row.append("" if hit is None else
-                           _cell(hit["deepest_mm"], limit, f"{hit['nodes']}/{hit['of']}, {hit['deepest_mm']:.1f}"))
-        else:
-            row += [str(entry["states"]), f"{entry['most_nodes']}/{entry['of']}",
-                    _cell(entry["deepest_mm"], limit, f"{entry['deepest_mm']:.1f}"),
-                    f"{entry['deepest_state']} ({entry['deepest_angle_deg']:.0f} deg)"]
-        table.add_row(*row)
-    console.print(table)
-    gaps = Table(title="largest gap between a muscle's belly and its bed (mm; at: position between origin 0 and "
-                       "insertion 1)")
-    gaps.add_column("muscle")
-    gaps.add_column("bed")
-    if few:
-        for state in results:
-            gaps.add_column(f"{state['state']}\n{state['elbow_angle_deg']:.0f} deg", justify="right")
-    else:
-        gaps.add_column("largest gap", justify="right")
-        gaps.add_column("in state", justify="right")
-    for entry in worst["bed_gaps"]:
-        row = [entry["muscle"], ", ".join(entry["bed"])]
-        if few:
-            for state in results:
-                hit = next(r for r in state["bed_gaps"] if r["muscle"] == entry["muscle"])
-                gap = hit["largest_gap_mm"]
-                row.append(f"{gap:.1f} at {hit['at_fraction']:.2f}" if gap > 0 else "0 (on its bed)")
-        else:
-            row += [f"{entry['largest_gap_mm']:.1f}", f"{entry['state']} ({entry['elbow_angle_deg']:.0f} deg)"]
-        gaps.add_row(*row)
-    console.print(gaps)
-
-
-def check_outlines_table(console, model_file=None, out: Path | None = None) -> list[dict]:
-    """The model file's muscle outlines across the humerus (persival.model.arm.cross_sections): a table
-    of the overlaps per level, and the JSON file."""
-    from rich.table import Table
-
-    from persival.model.arm.cross_sections import LEVELS, outline_overlaps, where
-
-    kinematics = ArmKinematics(model_file, check_outlines=False)  # here they are reported, not refused
-    rows = outline_overlaps(kinematics)
-    table = Table(title=f"{kinematics.spec.name}: outlines across the humerus overlapping each other or the bone, "
-                        f"or outside the skin ({len(rows)} at {len(LEVELS)} levels; muscles in their mesh poses)")
-    for column in ("level", "z (mm)", "outline", "where", "vertices", "deepest (mm)"):
-        table.add_column(column, justify="right" if column in ("z (mm)", "vertices", "deepest (mm)") else "left")
-    for r in rows:
-        table.add_row(f"{100 * r['level']:.0f} %", f"{r['z_mm']:g}", r["outline"], where(r), f"{r['vertices']}/{r['of']}",
-                      f"{r['deepest_mm']:.1f}")
-    console.print(table if rows else "no outlines overlap or leave the skin at any level")
-    if out is not None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps({"model": kinematics.spec.name, "levels": list(LEVELS), "overlaps": rows}, indent=1))
-        console.print(f"wrote {out}")
-    return rows

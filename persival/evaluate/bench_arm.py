@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["run_arm_benchmark", "print_arm_benchmark"]
+__all__ = ["run_arm_benchmark"]
 
 
 def _peak_mb() -> dict:
@@ -101,45 +101,3 @@ def run_arm_benchmark(profile: str = "quick", states: int = 10, direct: int = 0,
     return result
 
 
-def print_arm_benchmark(result: dict) -> None:
-    from rich.console import Console
-    from rich.table import Table
-
-    t = Table(title=f"FE arm from response tables ({result['profile']} profile; targets: docs/benchmarks.md)")
-    t.add_column("quantity")
-    t.add_column("value", justify="right")
-    tab = result["tables"]
-    t.add_row("response tables: columns (angles x levels)", f"{tab['columns']} ({tab['angles']} x {tab['levels']})")
-    t.add_row("response tables: column compute, all columns \\[s]", f"{tab['column_compute_s']:.0f}")
-    t.add_row("response tables: this run \\[s] (0 when cached)", f"{tab['this_run_s']:.1f}")
-    t.add_row("warm start: mesh + hanging arm + tables \\[s]", f"{result['warm_start_s']:.1f}")
-    t.add_row("exact path per state, median / max \\[s]", f"{result['exact_s_median']:.2f} / {result['exact_s_max']:.2f}")
-    t.add_row("table-only path per state, median \\[ms]", f"{1e3 * result['table_only_s_median']:.1f}")
-    t.add_row("random states with their equilibrium outside the tables (skipped)", f"{len(result['outside_table'])}")
-    for failure in result.get("exact_failed", []):
-        t.add_row("random state whose exact path failed (not timed)",
-                  f"alpha {np.round(failure['alpha'], 3).tolist()}: {failure['reason']} ({failure['seconds']:.1f} s)")
-    rows = result["states"]
-    t.add_row("table-only vs exact: angle, max \\[deg]",
-              f"{max(abs(r['theta_exact'] - r['theta_table_only']) for r in rows):.3f}")
-    t.add_row("table-only vs exact: node error max / mean \\[mm]",
-              f"{max(r['table_only_node_error_max_mm'] for r in rows):.3f} / "
-              f"{np.mean([r['table_only_node_error_mean_mm'] for r in rows]):.3f}")
-    with_direct = [r for r in rows if "direct_s" in r]
-    if with_direct:
-        t.add_row(f"direct coupled solve per state, median of {len(with_direct)} \\[s]",
-                  f"{np.median([r['direct_s'] for r in with_direct]):.1f}")
-        t.add_row("exact vs direct: angle / node, max",
-                  f"{max(abs(r['theta_exact'] - r['theta_direct']) for r in with_direct):.2e} deg / "
-                  f"{max(r['exact_vs_direct_node_max_mm'] for r in with_direct):.2e} mm")
-    t.add_row("largest |moment residual| \\[N mm] / max |J-1|",
-              f"{max(abs(r['moment_residual_Nmm']) for r in rows):.1e} / {max(r['max_abs_J_minus_1'] for r in rows):.2%}")
-    if "campaign" in result:
-        c = result["campaign"]
-        t.add_row(f"level-{c['level']} campaign: {c['states']} states, wall \\[min]",
-                  f"{c['wall_s'] / 60:.1f} ({c['done']} done, {c['failed']} failed)")
-        t.add_row("  + tables (column compute / 2 workers) \\[min]", f"{(c['wall_s'] + tab['column_compute_s'] / 2) / 60:.1f}")
-    mem = result["peak_memory"]
-    t.add_row("peak memory: this process / largest worker \\[MB]",
-              f"{mem['this_process_MB']:.0f} / {mem['largest_worker_MB']:.0f}")
-    Console().print(t)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["run_deployed_benchmark", "print_deployed_benchmark"]
+__all__ = ["run_deployed_benchmark"]
 
 
 def _summary(positions, angles, truth) -> dict:
@@ -72,20 +72,3 @@ def _sg_all(sg, truth):
     return positions[:, ids], angles
 
 
-def print_deployed_benchmark(result: dict) -> str:
-    """Print the table; returns it as markdown (for docs/benchmarks.md)."""
-    from rich.console import Console
-    from rich.table import Table
-
-    table = Table(title=f"{result['states']} exact FE states at random activations (seed {result['seed']}, "
-                  f"{result['profile']} profile; solved in {result['solve_seconds']:.0f} s)")
-    for column in ("model", "worst MaxAE mm", "p95 MaxAE mm", "mean MAE mm", "worst angle error deg"):
-        table.add_column(column, justify="left" if column == "model" else "right")
-    lines = ["| model | worst MaxAE mm | p95 MaxAE mm | mean MAE mm | worst angle error deg |", "|---|---|---|---|---|"]
-    for name, r in result["rows"].items():
-        cells = [f"{r['max_ae_mm']:.2f}", f"{r['p95_max_ae_mm']:.2f}" if "p95_max_ae_mm" in r else "-", f"{r['mae_mm']:.3f}",
-                 f"{r['max_angle_error_deg']:.3f}" if "max_angle_error_deg" in r else "-"]
-        table.add_row(name, *cells)
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    Console().print(table)
-    return "\n".join(lines) + "\n"

@@ -99,28 +99,3 @@ def run_fe_benchmark(mesh_size: float = 6.3, activation: float = 1.0, repeats: i
     )
 
 
-def print_fe_benchmark(result: FEBenchmark) -> None:
-    from rich.console import Console
-    from rich.table import Table
-
-    table = Table(title=f"FE Newton iteration vs factorization ({result.backend})")
-    table.add_column("quantity")
-    table.add_column("value", justify="right")
-    rows = [
-        ("tet10 cells", f"{result.cells}"),
-        ("DOFs (free)", f"{result.dofs} ({result.free_dofs})"),
-        ("surface nodes", f"{result.surface_nodes}"),
-        ("assembly K + f \\[s]", f"{result.assembly_s:.4f}"),
-        ("internal force f only \\[s]", f"{result.internal_force_s:.4f}"),
-        ("symbolic analysis (once per pattern) \\[s]", f"{result.analysis_s:.4f}"),
-        ("numerical factorization \\[s]", f"{result.factorization_s:.4f}"),
-        ("triangular solves \\[s]", f"{result.solve_s:.4f}"),
-        ("one Newton iteration \\[s]", f"{result.newton_iteration_s:.4f}"),
-        ("Newton iteration / factorization", f"{result.ratio:.2f}  (target <= 1.5)"),
-        ("full solve: load steps / Newton iterations", f"{result.load_steps} / {result.newton_iterations}"),
-        ("full solve wall time \\[s]", f"{result.solve_wall_s:.2f}"),
-        ("max |J - 1|", f"{result.max_volume_change:.2e}"),
-    ]
-    for name, value in rows:
-        table.add_row(name, value)
-    Console().print(table)

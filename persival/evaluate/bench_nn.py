@@ -154,22 +154,21 @@ def _sg_rows(run: LoadedRun, truth, reps, budget_s) -> list[dict]:
     return rows
 
 
-def _peer_rows(activation, reps, budget_s, console) -> tuple[list[dict], dict]:
-    from rich.markup import escape
-
+def _peer_rows(activation, reps, budget_s, warn) -> tuple[list[dict], dict]:
+    """The Keras/TFLite peer's rows (a child process); ``warn(text)``: why there are none."""
     from persival.evaluate.tflite_peer import INSTALL_HINT, peer_available, run_in_subprocess
 
     if not peer_available():
-        if console is not None:  # escaped: rich would take "[peer]" in the hint for a style tag
-            console.print(f"[yellow]{escape(INSTALL_HINT)}[/yellow]")
+        if warn is not None:
+            warn(INSTALL_HINT)
         return [], {"installed": False, "hint": INSTALL_HINT}
     import subprocess
 
     try:
         result = run_in_subprocess(2809, 700, activation, reps, budget_s)
     except (RuntimeError, subprocess.TimeoutExpired) as exc:
-        if console is not None:
-            console.print(f"[yellow]{escape(str(exc))}[/yellow]")
+        if warn is not None:
+            warn(str(exc))
         return [], {"installed": True, "hint": f"the peer is installed but failed: {exc}"}
     rows = [_row("paper arch 5->2809, combined", r["runtime"], r["threads"], r["batch"], r,
                  parameters=result["parameters"],
@@ -221,9 +220,10 @@ def _targets(rows: list[dict], peer: dict) -> tuple[dict, list[str]]:
     return check, notes
 
 
-def bench_table(run: LoadedRun, reps: int = 1000, budget_s: float = 4.0, peer: bool = True, console=None,
+def bench_table(run: LoadedRun, reps: int = 1000, budget_s: float = 4.0, peer: bool = True, warn=None,
                 progress=None) -> dict:
-    """Every row of the speed table; ``progress(step, total, what)`` after each group."""
+    """Every row of the speed table; ``progress(step, total, what)`` after each group, ``warn(text)``
+    where a row group is missing and why."""
     activation = run.networks["paper"].config.activation if "paper" in run.networks else "silu"
     truth = _held_out(run)
     groups = [("paper architecture (PyTorch)", lambda: _paper_architecture_rows(activation, 1, reps, budget_s)),
@@ -235,7 +235,7 @@ def bench_table(run: LoadedRun, reps: int = 1000, budget_s: float = 4.0, peer: b
         groups.append(("Keras/TFLite peer (child process)", None))
     for k, (what, fn) in enumerate(groups):
         if fn is None:
-            peer_rows, peer_info = _peer_rows(activation, reps, budget_s, console)
+            peer_rows, peer_info = _peer_rows(activation, reps, budget_s, warn)
             rows += peer_rows
         else:
             rows += fn()

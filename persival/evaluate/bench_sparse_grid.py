@@ -87,23 +87,3 @@ def run_benchmark(
     return BenchResult(grid.n_points, n_out, t1 - t0, t2 - t1, rows)
 
 
-def print_benchmark(result: BenchResult) -> None:
-    from rich.console import Console
-    from rich.table import Table
-
-    table = Table(
-        title=f"Sparse grid: {result.n_points} points, {result.n_out} outputs per state",
-    )
-    table.add_column("operation")
-    table.add_column("dtype")
-    table.add_column("batch", justify="right")
-    table.add_column("mean s/state", justify="right")
-    table.add_column("median s/state", justify="right")
-    table.add_column("reps", justify="right")
-    for r in result.rows:
-        table.add_row(r.what, r.dtype, str(r.batch), f"{r.seconds_per_state:.3e}",
-                      f"{r.median_seconds_per_state:.3e}", str(r.repetitions))
-    for what, sec in (("fit: LU factorize", result.fit_factorize_s),
-                      (f"fit: solve {result.n_out} out", result.fit_solve_s)):
-        table.add_row(what, "float64", "-", f"{sec:.3e}", "-", "1")
-    Console().print(table)

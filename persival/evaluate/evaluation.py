@@ -211,7 +211,8 @@ def run_bench(out: str | Path, progress=True, reps: int = 1000, budget_s: float 
     run = load_run(out)
     run.layout.evaluate.mkdir(parents=True, exist_ok=True)
     with _Steps(progress, console) as steps:
-        table = bench_table(run, reps, budget_s, peer, console, steps.task("speed table", 5 if peer else 4))
+        warn = None if console is None else (lambda text: console.print(text, markup=False, style="yellow"))
+        table = bench_table(run, reps, budget_s, peer, warn, steps.task("speed table", 5 if peer else 4))
     return _save(table, run.layout.evaluate, command or default_command(out, "bench nn"),
                  {"export": str(run.layout.export), "sg": str(run.layout.sg)}, t0)
 

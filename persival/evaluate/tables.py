@@ -18,7 +18,7 @@ import json
 import math
 from pathlib import Path
 
-__all__ = ["make_table", "cell", "to_markdown", "to_html", "to_rich", "save_table", "load_table"]
+__all__ = ["make_table", "cell", "grid", "to_markdown", "to_html", "save_table", "load_table"]
 
 
 def make_table(name: str, title: str, description: str, columns: list[tuple[str, str, str]], rows: list[dict],
@@ -40,7 +40,7 @@ def cell(value, fmt: str = "{}") -> str:
         return str(value)
 
 
-def _grid(table: dict) -> tuple[list[str], list[tuple[str, list[str]]]]:
+def grid(table: dict) -> tuple[list[str], list[tuple[str, list[str]]]]:
     """Header labels and (kind, cells) rows: ours first, then the paper's (a first column says
     whose, when the table has the paper's rows)."""
     cols = table["columns"]
@@ -53,7 +53,7 @@ def _grid(table: dict) -> tuple[list[str], list[tuple[str, list[str]]]]:
 
 
 def to_markdown(table: dict) -> str:
-    header, body = _grid(table)
+    header, body = grid(table)
     lines = [f"### {table['title']}", "", table["description"], ""]
     lines.append("| " + " | ".join(header) + " |")
     lines.append("|" + "|".join("---" for _ in header) + "|")
@@ -69,7 +69,7 @@ def to_markdown(table: dict) -> str:
 
 
 def to_html(table: dict) -> str:
-    header, body = _grid(table)
+    header, body = grid(table)
     esc = html.escape
     out = [f'<section class="table" id="table-{esc(table["name"])}">', f"<h3>{esc(table['title'])}</h3>",
            f"<p>{esc(table['description'])}</p>", "<table>",
@@ -84,51 +84,6 @@ def to_html(table: dict) -> str:
         out.append(f'<p class="provenance">provenance: <code>{esc(json.dumps(prov, default=str))}</code></p>')
     out.append("</section>")
     return "\n".join(out)
-
-
-def to_rich(table: dict, columns: list[tuple[str, list[str]]] | None = None):
-    """A rich Table. ``columns``: None for every column, or a narrow view for a terminal:
-    (label, keys) pairs whose cell stacks the keys' values one per line (e.g. variant over
-    runtime; "a|b": a, or b where a row has no a), paper rows marked "paper:" in their first
-    cell. Cells are plain text, never markup (a "[peer]" in a cell is printed as written)."""
-    from rich.table import Table
-    from rich.text import Text
-
-    if columns is None:
-        header, body = _grid(table)
-        t = Table(title=table["title"], caption=table["description"] if len(table["description"]) < 200 else None)
-        for k, h in enumerate(header):
-            t.add_column(h or "", justify="left" if k < 3 else "right")
-        for kind, cells in body:
-            t.add_row(*(Text(c) for c in cells), style="dim" if kind == "paper" else None)
-        return t
-    from rich import box
-
-    formats = {c["key"]: c["format"] for c in table["columns"]}
-    body = []
-    for kind, rows in (("ours", table["rows"]), ("paper", table["paper"])):
-        for r in rows:
-            cells = ["\n".join(_first(r, key, formats) for key in keys) for _, keys in columns]
-            if kind == "paper":
-                cells[0] = f"paper: {cells[0]}"
-            body.append((kind, cells))
-    t = Table(title=table["title"], box=box.SIMPLE_HEAD, padding=(0, 1), pad_edge=False)
-    for k, (label, _) in enumerate(columns):
-        if k == 0:  # takes what the numbers leave, wrapping at words
-            t.add_column(label, justify="left")
-        else:  # as wide as its widest entry, never wrapped
-            width = max(len(line) for text in [label] + [c[k] for _, c in body] for line in text.splitlines())
-            t.add_column(label, justify="right", no_wrap=True, width=width)
-    for kind, cells in body:
-        t.add_row(*(Text(c) for c in cells), style="dim" if kind == "paper" else None)
-    return t
-
-
-def _first(row: dict, keys: str, formats: dict) -> str:
-    for key in keys.split("|"):
-        if row.get(key) is not None:
-            return cell(row[key], formats.get(key, "{}"))
-    return "-"
 
 
 def save_table(table: dict, folder: str | Path) -> tuple[Path, Path]:
