@@ -16,12 +16,8 @@ operating system releases when the process dies, so a kill -9 never leaves a sta
 from __future__ import annotations
 
 import datetime as _dt
-import fcntl
-import json
 import os
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -34,27 +30,17 @@ from persival.campaign.store_layout import (
     FORMAT_NAME,
     FORMAT_VERSION,
     MISSING,
+    STATUS_NAMES,
+    StoreBusyError,
     StoreError,
     create_layout,
+    dumps_json,
+    take_writer_lock,
 )
+from persival.campaign.store_report import StateTable, state_table, store_summary
 
-__all__ = [
-    "FORMAT_NAME",
-    "FORMAT_VERSION",
-    "MISSING",
-    "DONE",
-    "FAILED",
-    "STATUS_NAMES",
-    "StoreError",
-    "StoreVersionError",
-    "CampaignMismatchError",
-    "StoreBusyError",
-    "StateTable",
-    "CampaignStore",
-]
-
-STATUS_NAMES = {MISSING: "missing", DONE: "done", FAILED: "failed"}
-_LOCK_NAME = "writer.lock"
+__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "MISSING", "DONE", "FAILED", "STATUS_NAMES", "StoreError",
+           "StoreVersionError", "CampaignMismatchError", "StoreBusyError", "CampaignStore"]
 
 
 class StoreVersionError(StoreError):
@@ -63,39 +49,6 @@ class StoreVersionError(StoreError):
 
 class CampaignMismatchError(StoreError):
     """A store that belongs to another campaign (design or simulator differ)."""
-
-
-class StoreBusyError(StoreError):
-    """Another live process is writing to the store."""
-
-
-@dataclass
-class StateTable:
-    """Every state of a store, one row per design point, in design order."""
-
-    ids: np.ndarray  # (n,) int64
-    activations: np.ndarray  # (n, 5)
-    status: np.ndarray  # (n,) str: done / failed / missing
-    elbow_angle_deg: np.ndarray  # (n,) NaN unless done
-    wall_time_s: np.ndarray  # (n,) NaN if never attempted
-    attempts: np.ndarray  # (n,) int
-    reason: list[str]  # failure reason ("" unless failed)
-    statistics: list[dict | None]  # simulator statistics (None if never attempted)
-
-    def __len__(self) -> int:
-        return len(self.ids)
-
-
-def _json_default(obj: Any):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    return str(obj)
-
-
-def _dumps(obj: Any) -> str:
-    return json.dumps(obj, default=_json_default, sort_keys=True)
 
 
 class CampaignStore:
@@ -140,22 +93,7 @@ class CampaignStore:
         """Open an existing store as its only writer (raises StoreBusyError if one is live)."""
         path = Path(path)
         cls._open(path, writable=False)  # validate format before taking the lock
-        fd = os.open(path / _LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "?"
-            os.close(fd)
-            raise StoreBusyError(
-                f"{path} is being written by another live process (pid {holder}); "
-                "wait for it to finish or stop it first"
-            ) from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, str(os.getpid()).encode(), 0)
-        # zarr writes each chunk to "<chunk>.<uuid>.partial" and renames it; a writer killed
-        # in between leaves the temporary file behind. Only the writer may remove them.
-        for leftover in path.rglob("*.partial"):
-            leftover.unlink(missing_ok=True)
+        fd = take_writer_lock(path)
         try:
             return cls._open(path, writable=True, lock_fd=fd)
         except BaseException:
@@ -294,7 +232,7 @@ class CampaignStore:
     def _write_common(self, index, reason, statistics, wall_time_s, attempts) -> None:
         st = self._states
         st["reason"][index] = str(reason)
-        st["statistics"][index] = _dumps(statistics)
+        st["statistics"][index] = dumps_json(statistics)
         st["wall_time_s"][index] = float(wall_time_s)
         st["attempts"][index] = int(attempts)
         st["finished_at"][index] = _dt.datetime.now(_dt.UTC).timestamp()
@@ -316,22 +254,8 @@ class CampaignStore:
         return np.flatnonzero(mask)
 
     def states(self) -> StateTable:
-        codes = self.status_codes()
-        st = self._states
-        stats = [json.loads(s) if s else None for s in st["statistics"][:].tolist()]
-        angles = np.asarray(st["elbow_angle_deg"][:], dtype=np.float64)
-        angles[codes != DONE] = np.nan
-        d = self._group["design"]
-        return StateTable(
-            ids=np.asarray(d["ids"][:]),
-            activations=np.asarray(d["activations"][:]),
-            status=np.array([STATUS_NAMES[int(c)] for c in codes]),
-            elbow_angle_deg=angles,
-            wall_time_s=np.asarray(st["wall_time_s"][:], dtype=np.float64),
-            attempts=np.asarray(st["attempts"][:], dtype=np.int64),
-            reason=[str(r) if c == FAILED else "" for r, c in zip(st["reason"][:].tolist(), codes)],
-            statistics=stats,
-        )
+        """Every state of the store, one row per design point (persival.campaign.store_report)."""
+        return state_table(self)
 
     @property
     def activations(self) -> np.ndarray:
@@ -367,29 +291,4 @@ class CampaignStore:
 
     def summary(self) -> dict:
         """Counts of done / failed / missing, failure reasons, and wall-time figures."""
-        codes = self.status_codes()
-        wall = np.asarray(self._states["wall_time_s"][:], dtype=np.float64)
-        reasons: dict[str, int] = {}
-        failed = np.flatnonzero(codes == FAILED)
-        if len(failed):
-            for r in self._states["reason"].get_orthogonal_selection((failed,)).tolist():
-                key = str(r).splitlines()[0][:120] if r else "unknown"
-                reasons[key] = reasons.get(key, 0) + 1
-        done = codes == DONE
-        return {
-            "path": str(self.path),
-            "total": int(len(codes)),
-            "done": int(done.sum()),
-            "failed": int((codes == FAILED).sum()),
-            "missing": int((codes == MISSING).sum()),
-            "failure_reasons": reasons,
-            "wall_time_s_total": float(np.nansum(wall)),
-            "wall_time_s_mean_done": float(wall[done].mean()) if done.any() else None,
-            "store_bytes": store_size_bytes(self.path),
-            "simulator": self._attrs["simulator"]["kind"],
-            "model_hash": self.provenance["model_hash"],
-        }
-
-
-def store_size_bytes(path: str | Path) -> int:
-    return sum(f.stat().st_size for f in Path(path).rglob("*") if f.is_file())
+        return store_summary(self)

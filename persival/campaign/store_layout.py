@@ -20,10 +20,12 @@ Layout (``n`` design points, one group per concern)::
 from __future__ import annotations
 
 import datetime as _dt
+import fcntl
 import json
 import os
 import shutil
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -31,15 +33,60 @@ import persival
 from persival.campaign.design import Design
 from persival.campaign.simulator import ReferenceGeometry, SimulatorSpec
 
-__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "MISSING", "DONE", "FAILED", "StoreError", "create_layout", "now"]
+__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "MISSING", "DONE", "FAILED", "STATUS_NAMES", "StoreError", "StoreBusyError",
+           "create_layout", "dumps_json", "now", "take_writer_lock"]
 
 FORMAT_NAME = "persival-campaign"
 FORMAT_VERSION = 1
 MISSING, DONE, FAILED = 0, 1, 2
+STATUS_NAMES = {MISSING: "missing", DONE: "done", FAILED: "failed"}
 
 
 class StoreError(RuntimeError):
     """A path that is not a usable campaign store."""
+
+
+class StoreBusyError(StoreError):
+    """Another live process is writing to the store."""
+
+
+_LOCK_NAME = "writer.lock"
+
+
+def take_writer_lock(path: Path) -> int:
+    """The store's advisory writer lock (the operating system releases it when the process dies,
+    so a kill -9 never leaves a stale lock); its file descriptor. StoreBusyError while another live
+    process holds it. Removes what a killed writer left half-written."""
+    fd = os.open(path / _LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "?"
+        os.close(fd)
+        raise StoreBusyError(
+            f"{path} is being written by another live process (pid {holder}); "
+            "wait for it to finish or stop it first"
+        ) from None
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, str(os.getpid()).encode(), 0)
+    # zarr writes each chunk to "<chunk>.<uuid>.partial" and renames it; a writer killed
+    # in between leaves the temporary file behind. Only the writer may remove them.
+    for leftover in path.rglob("*.partial"):
+        leftover.unlink(missing_ok=True)
+    return fd
+
+
+def _json_default(obj: Any):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return str(obj)
+
+
+def dumps_json(obj: Any) -> str:
+    """JSON of a state's statistics (numpy scalars and arrays as numbers and lists), keys sorted."""
+    return json.dumps(obj, default=_json_default, sort_keys=True)
 
 
 def now() -> str:

@@ -20,7 +20,7 @@ import numpy as np
 from persival.figures import save_figure
 from persival.model.arm.arm_model import ArmModel
 from persival.model.fe.solver import ConvergenceError
-from persival.tables.moment_table import sweep_muscle
+from persival.tables.continuation import sweep_muscle
 from persival.vocabulary import MUSCLES
 
 

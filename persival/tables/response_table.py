@@ -7,7 +7,7 @@ activation vector is one scalar equation in the tabulated moments, and each musc
 the root is its table state there (:mod:`persival.tables.table_solve` uses the tables).
 
 A column is one muscle at one activation level over every table angle, computed by continuation
-along theta (:func:`~persival.tables.moment_table.sweep_muscle`), each level continued from
+along theta (:func:`~persival.tables.continuation.sweep_muscle`), each level continued from
 the previous level's longest state (continuation along a). Layout of a table folder:
 
     header.json                  format, model hash, profile, mesh fingerprint, angles, levels

@@ -11,7 +11,7 @@ import numpy as np
 
 from persival.model.arm.muscle_state import MuscleState
 from persival.model.arm.state_cache import mesh_fingerprint
-from persival.tables.moment_table import sweep_muscle
+from persival.tables.continuation import sweep_muscle
 from persival.tables.response_table import DEFAULT_ANGLES, DEFAULT_LEVELS, ResponseTable, default_table_dir
 from persival.vocabulary import MUSCLES
 
