@@ -1,4 +1,4 @@
-"""The joint iteration's stopping rule (persival/model/arm/arm_model.py, ArmModel._equilibrium), on a moment
+"""The joint iteration's stopping rule (persival/model/arm/joint_root.py, through ArmModel._equilibrium), on a moment
 balance with a noise floor: muscles in contact with a wall reach their own tolerance with a
 residual noise of a few hundredths of a N mm, so the joint's g changes sign across a hair's
 width of angle without dropping below the moment tolerance."""
