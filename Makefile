@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 OUT    ?= results
 WEB    := persival/deploy/web
-WEB_SRC := $(WEB)/package.json $(WEB)/package-lock.json $(WEB)/build.mjs $(WEB)/index.html $(wildcard $(WEB)/src/*)
+WEB_SRC := $(WEB)/package.json $(WEB)/package-lock.json $(WEB)/build.mjs $(WEB)/index.html $(wildcard $(WEB)/src/*) $(wildcard $(WEB)/src/*/*)
 
 .PHONY: setup lock web chromium run lint test test-fast bench clean
 

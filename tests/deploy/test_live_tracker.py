@@ -48,7 +48,7 @@ def live_run(motion_export, tmp_path_factory):
     shots.mkdir(parents=True, exist_ok=True)
     work = tmp_path_factory.mktemp("live")
     movement = ["--lo", str(LO), "--hi", str(HI), "--period", str(PERIOD_S), "--rate", str(RATE_HZ)]
-    # the user follows the target a little short of it at both ends, and late (the client starts after the exercise)
+    # the user follows the target a little short of it at both ends (the exercise starts with the first sample)
     exercise = ["--lo", str(PLAN["lo"] - 5), "--hi", str(PLAN["hi"] - 5), "--period", str(PLAN["period"]),
                 "--cycles", str(PLAN["reps"]), "--rate", str(RATE_HZ)]
     config = {"video": str(blank_video(work / "blank.y4m")), "python": sys.executable, "client": str(CLIENT),

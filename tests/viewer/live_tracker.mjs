@@ -21,6 +21,8 @@ const [url, outDir, configJson] = process.argv.slice(2);
 const config = JSON.parse(configJson);
 const profile = mkdtempSync(join(tmpdir(), 'persival-chromium-'));
 const result = { consoleErrors: [], pageErrors: [] };
+// a picture for people to look at: on a busy machine it may time out, which fails nothing
+const shot = (target, path) => target.screenshot({ path, timeout: 60000 }).catch((e) => { result.screenshotErrors = [...(result.screenshotErrors || []), String(e).slice(0, 200)]; });
 const wsUrl = `${url.replace(/^http/, 'ws').replace(/\/$/, '')}/ws/tracker`;
 
 const browser = await chromium.launchPersistentContext(profile, {
@@ -73,7 +75,7 @@ try {
   result.blankWebcam = await page.evaluate(() => window.persival.webcam());
   result.blankMessage = await message(page);
   result.afterBlank = (await stats(page)).elbowAngle;
-  await page.screenshot({ path: join(outDir, 'live_no_person.png') });
+  await shot(page, join(outDir, 'live_no_person.png'));
   await page.evaluate(() => window.persival.live('off'));
 
   // --- the tracker: a movement through the relay, the frame rate meanwhile ----------------------
@@ -90,7 +92,7 @@ try {
   await page.waitForTimeout(300);
   result.log = await page.evaluate(() => window.persival.liveLog());
   result.afterMovement = await stats(page);
-  await page.screenshot({ path: join(outDir, 'live_tracker.png') });
+  await shot(page, join(outDir, 'live_tracker.png'));
 
   // --- a tracker that sends garbage, then quaternions, then stops --------------------------------
   result.garbage = await page.evaluate(async () => {
@@ -135,18 +137,21 @@ try {
       document.getElementById(id).value = String(v);
     }
   }, config.exercise.plan);
-  result.exerciseStart = await page.evaluate(() => window.persival.startExercise());
+  // the exercise starts with the tracker's first sample (a busy machine starts the client late)
+  const before = (await stats(page)).live.sample?.seq ?? 0;
   const running = client(config.exercise.client);
+  await page.waitForFunction((seq) => (window.persival.stats().live.sample?.seq ?? 0) > seq, before, { timeout: 20000, polling: 'raf' });
+  result.exerciseStart = await page.evaluate(() => window.persival.startExercise());
   await page.waitForTimeout(1000 * config.exercise.plan.period * 0.6);
   result.ghost = (await stats(page)).live.ghost;
-  await page.screenshot({ path: join(outDir, 'exercise_running.png') });
+  await shot(page, join(outDir, 'exercise_running.png'));
   await running;
   await page.waitForFunction(() => window.persival.exerciseResult() !== null, null, { timeout: 15000 });
   result.exercise = await page.evaluate(() => window.persival.exerciseResult());
   result.exerciseNote = await page.evaluate(() => document.getElementById('ex-note').textContent);
   result.exerciseTable = await page.evaluate(() => document.querySelectorAll('#ex-table tbody tr').length);
-  await page.screenshot({ path: join(outDir, 'exercise_summary.png') });
-  await page.locator('#ex-picture').screenshot({ path: join(outDir, 'exercise_picture.png') });
+  await shot(page, join(outDir, 'exercise_summary.png'));
+  await shot(page.locator('#ex-picture'), join(outDir, 'exercise_picture.png'));
   await page.evaluate(() => window.persival.live('off'));
   result.ok = true;
 } catch (e) {

@@ -16,6 +16,8 @@ const [url, outDir, configJson] = process.argv.slice(2);
 const config = JSON.parse(configJson);
 const profile = mkdtempSync(join(tmpdir(), 'persival-chromium-'));
 const result = { consoleErrors: [], pageErrors: [], frames: [] };
+// a picture for people to look at: on a busy machine it may time out, which fails nothing
+const shot = (target, path) => target.screenshot({ path, timeout: 60000 }).catch((e) => { result.screenshotErrors = [...(result.screenshotErrors || []), String(e).slice(0, 200)]; });
 
 const browser = await chromium.launchPersistentContext(profile, {
   executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
@@ -57,8 +59,8 @@ try {
   result.log = await page.evaluate(() => window.persival.liveLog());
   result.privacy = await page.evaluate(() => document.querySelector('#live .note').textContent);
   result.preview = await page.evaluate(() => { const c = document.getElementById('webcam-view'); return { hidden: c.hidden, width: c.width, height: c.height }; });
-  await page.screenshot({ path: join(outDir, 'live_webcam.png') });
-  await page.locator('#webcam-view').screenshot({ path: join(outDir, 'live_webcam_preview.png') });
+  await shot(page, join(outDir, 'live_webcam.png'));
+  await shot(page.locator('#webcam-view'), join(outDir, 'live_webcam_preview.png'));
   await page.evaluate(() => window.persival.live('off'));
   result.ok = true;
 } catch (e) {

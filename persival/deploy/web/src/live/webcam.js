@@ -99,6 +99,8 @@ export class Webcam {
         this.grabbed = performance.now();
         try { await this.pose.send({ image: this.video }); } catch (e) { this.onProblem(`the pose tracker failed on a frame: ${e.message || e}`); }
       }
+      // a drawn frame between two tracked ones (the tracker runs on the page's thread), then a new camera frame
+      await new Promise((resolve) => requestAnimationFrame(resolve));
       await new Promise((resolve) => (this.video.requestVideoFrameCallback ? this.video.requestVideoFrameCallback(resolve)
         : requestAnimationFrame(resolve)));
     }
