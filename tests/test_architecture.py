@@ -136,3 +136,27 @@ def test_only_the_command_line_imports_typer():
                  if not (module == "persival.cli" or module.startswith("persival.cli."))
                  and re.search(r"^\s*(import typer|from typer)", path.read_text(), re.M)]
     assert not offenders, "typer imported outside persival.cli: " + ", ".join(offenders)
+
+
+# Modules over 300 lines and functions over 60: each a numerical kernel (its docstring says why) or
+# a command's option list. A new one fails here: look for the second idea inside it.
+LONG_MODULES = {"persival.surrogate.sparse_grid", "persival.model.fe.solver", "persival.model.arm.muscle_unit",
+                "persival.model.anatomy.bone_shapes", "persival.model.fe.material"}
+LONG_FUNCTIONS = {"persival.model.fe.material._law_point", "persival.model.fe.geometry.swept_solid_mesh",
+                  "persival.model.fe.assembly._element_kernel", "persival.model.fe.solver.solve",
+                  "persival.evaluate.bench_arm.run_arm_benchmark",
+                  "persival.cli.run.register", "persival.cli.run.run", "persival.cli.campaign.run"}
+
+
+def test_modules_and_functions_stay_small():
+    long_modules, long_functions = set(), set()
+    for path, module in modules():
+        text = path.read_text()
+        if len(text.splitlines()) > 300:
+            long_modules.add(module)
+            assert "One module on purpose" in (ast.get_docstring(ast.parse(text)) or ""), f"{module}: say why in its docstring"
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.end_lineno - node.lineno + 1 > 60:
+                long_functions.add(f"{module}.{node.name}")
+    assert long_modules <= LONG_MODULES, f"modules over 300 lines: {sorted(long_modules - LONG_MODULES)}"
+    assert long_functions <= LONG_FUNCTIONS, f"functions over 60 lines: {sorted(long_functions - LONG_FUNCTIONS)}"

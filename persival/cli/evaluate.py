@@ -130,7 +130,7 @@ def readme(
     check: bool = typer.Option(False, "--check", help="Write nothing; exit 1 when a block differs from its rendering."),
 ) -> None:
     """Rewrite the result blocks of README.md and docs/benchmarks.md from a run's results.json."""
-    from persival.evaluate.readme_tables import DEFAULT_FILES, load_results, rewrite_file
+    from persival.evaluate.readme_blocks import DEFAULT_FILES, load_results, rewrite_file
 
     paths = [Path(f) for f in (files or DEFAULT_FILES)]
     with user_errors():

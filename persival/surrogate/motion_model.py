@@ -29,16 +29,12 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.onnx_io import export_graph, onnx_session
-from persival.surrogate.activation_model import check_angles
 from persival.surrogate.least_effort import least_effort
 from persival.vocabulary import MUSCLES
 
-__all__ = ["MotionActivationModel", "RestAngleModel", "WINTER_GYRATION_RATIO"]
+__all__ = ["MotionActivationModel", "WINTER_GYRATION_RATIO"]
 
 WINTER_GYRATION_RATIO = 0.827 / 0.682  # radius of gyration about the elbow / centre-of-mass distance
-_ONNX_NAME = "activation_motion.onnx"
-_ANGLE_ONNX_NAME = "activation_angle.onnx"
 #: activations at which each muscle's moment is sampled for the least-effort solve (docs/theory.md, 6.4)
 ACTIVATION_SAMPLES = 65
 SOLVE_STRIDE = 4  # the least-effort table is solved on samples 0, 4, ..., 64 (17 chords)
@@ -247,8 +243,11 @@ class MotionActivationModel:
         stop = start + (int(np.argmin(ok[start:])) if not ok[start:].all() else len(ok) - start)
         return max(float(self.theta[start]), lowest_deg), float(self.theta[stop - 1])
 
-    def at_rest(self, lowest_deg: float = 10.0) -> RestAngleModel:
-        """The angle activation model of this balance: Theta -> alpha at zero velocity, acceleration and load."""
+    def at_rest(self, lowest_deg: float = 10.0):
+        """The angle activation model of this balance: Theta -> alpha at zero velocity, acceleration and
+        load (:class:`persival.surrogate.rest_angle_model.RestAngleModel`)."""
+        from persival.surrogate.rest_angle_model import RestAngleModel
+
         return RestAngleModel(self, self.static_range_deg(lowest_deg))
 
     # ------------------------------------------------------------------ export and files
@@ -270,33 +269,11 @@ class MotionActivationModel:
 
         return MotionGraph()
 
-    def probe(self, n: int = 512, seed: int = 0) -> np.ndarray:
-        """Random motion rows over the range (loads 0-5 kg, accelerations +-500 deg/s^2)."""
-        rng = np.random.default_rng(seed)
-        return np.column_stack([rng.uniform(*self.range_deg, n), rng.uniform(-200, 200, n),
-                                rng.uniform(-500, 500, n), rng.uniform(0.0, 5.0, n)])
-
     def export_onnx(self, folder: str | Path) -> dict:
-        """folder/activation_motion.onnx (opset 17): motion [b, 4] -> activations [b, 5],
-        moment_deficit_Nmm [b, 1]; checked against Python (1e-6 on feasible rows)."""
-        import torch
+        """folder/activation_motion.onnx (persival.surrogate.motion_onnx) and its metadata entry."""
+        from persival.surrogate.motion_onnx import export_motion_onnx
 
-        path = Path(folder) / _ONNX_NAME
-        example = torch.tensor([[60.0, 0.0, 0.0, 1.0], [90.0, 0.0, 0.0, 2.0]], dtype=torch.float32)
-        export_graph(self.torch_module(), example, path, "motion", ["activations", "moment_deficit_Nmm"])
-        probe = self.probe().astype(np.float32)
-        got = onnx_session(path).run(None, {"motion": probe})[0]
-        ref, feasible = self.predict(probe.astype(np.float64))
-        diff = float(np.abs(got - ref)[feasible].max())
-        if diff > 1e-6:
-            raise RuntimeError(f"activation_motion.onnx differs from Python by {diff:.2e} (tolerance 1e-6)")
-        holdable = self.holdable_load_kg(np.arange(np.ceil(self.range_deg[0] / 10) * 10, self.range_deg[1] + 1e-9, 10.0))
-        finite = holdable[np.isfinite(holdable)]  # max_load_kg: the most held anywhere (at 10-degree steps)
-        return {"file": _ONNX_NAME, "input": "motion", "output": "activations", "outputs": ["activations", "moment_deficit_Nmm"],
-                "input_columns": ["angle_deg", "velocity_deg_s", "acceleration_deg_s2", "load_kg"],
-                "range_deg": list(self.range_deg), "max_load_kg": float(finite.max()) if len(finite) else 0.0,
-                "holdable_load_kg_per_10_deg": [None if not np.isfinite(h) else round(float(h), 3) for h in holdable],
-                "max_abs_diff_vs_python": diff, **self.params}
+        return export_motion_onnx(self, folder)
 
     def save(self, folder: str | Path) -> Path:
         (folder := Path(folder)).mkdir(parents=True, exist_ok=True)
@@ -314,44 +291,3 @@ class MotionActivationModel:
                 raise ValueError(f"{folder}: a motion model of an older version (no moment samples): build it again")
             return cls(d["theta"], d["s"], *(d[k] for k in ("alpha", "base", "m_min", "m_max", "load_base", "samples")),
                        params)
-
-
-class RestAngleModel:
-    """Theta -> alpha of the motion model at zero velocity, acceleration and load: the angle
-    activation model that ships with the deployed model, so that the angle and the motion
-    requests of the contract give the same activations at no load (docs/theory.md, 6.4).
-
-    ``predict(theta (n,)) -> activations (n, 5)``; ``torch_module()``: elbow_angle_deg [b, 1] -> activations [b, 5].
-    """
-
-    source = "motion model at zero velocity, acceleration and load (least effort on the deployed model's balance)"
-
-    def __init__(self, motion: MotionActivationModel, range_deg: tuple[float, float]) -> None:
-        self.motion = motion
-        self.range_deg = (float(range_deg[0]), float(range_deg[1]))
-        inside = (motion.theta >= self.range_deg[0]) & (motion.theta <= self.range_deg[1])
-        self.knots = motion.theta[inside]  # where the map has its kinks (the motion grid's angles)
-        self.branch_notes: list = []
-
-    def _rows(self, theta_deg) -> np.ndarray:
-        theta = check_angles(theta_deg, self.range_deg)
-        return np.column_stack([theta, np.zeros((len(theta), 3))])
-
-    def predict(self, theta_deg) -> np.ndarray:
-        return self.motion.predict(self._rows(theta_deg))[0]
-
-    def torch_module(self):
-        import torch
-
-        motion = self.motion.torch_module()
-
-        class AtRest(torch.nn.Module):
-            def __init__(self):
-                super().__init__()
-                self.motion = motion
-
-            def forward(self, theta):
-                zeros = torch.zeros_like(theta)
-                return self.motion(torch.cat([theta, zeros, zeros, zeros], dim=1))[0]
-
-        return AtRest()

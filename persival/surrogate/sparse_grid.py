@@ -9,6 +9,10 @@ evaluation points becomes one basis matrix ``B(x)`` (m x N) and the result is th
 matrix product ``B(x) @ C`` with the coefficient matrix C (N x n_out). All outputs (e.g. every
 surface node of a muscle) then cost one streaming pass over C, which is what makes a whole
 surface state sub-millisecond.
+
+One module on purpose (a numerical kernel over 300 lines): the grid's index arithmetic, the
+B-spline basis and the hierarchization share their level/index tables, and SG++ exactness is
+checked on them together (tests/surrogate/test_sparse_grid*.py).
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ from test_evaluate import evaluated, tiny_run  # noqa: F401  (the session's run)
 from test_report_summary import _run as hand_made_run
 from typer.testing import CliRunner
 
-from persival.evaluate import readme_tables as rt
+from persival.evaluate import readme_blocks as rt
 from persival.evaluate.results_text import format_mb, format_mm, format_ms
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -18,6 +18,9 @@ about them without touching. The fossae of the humerus (olecranon, coronoid, rad
 as the space the forearm bones sweep over the joint's range: where they go, the humerus gives
 way. Coordinates: the elbow frame, origin at the hinge centre, x along the hinge axis
 (lateral), z along the humerus (proximal), y = z x x (anterior); forearm bones at theta = 0.
+
+One module on purpose (a geometric kernel over 300 lines): the three bones are implicit solids
+cut by one another's sweep over the joint's range, so their shapes are built together.
 """
 
 from __future__ import annotations

@@ -28,6 +28,10 @@ This turns the joint equilibrium into one scalar equation in theta (see ArmModel
 muscle into a small FE problem solved on its own: five solves of a few thousand DOFs instead
 of one of all of them, and a library of solved (theta, a) states per muscle that warm-starts
 every new state by interpolation (persival.model.arm.state_library).
+
+One module on purpose (a numerical kernel over 300 lines): one muscle's FE problem, its ties,
+contact, rest state and the moment's exact slope (a Schur complement on the same factorization)
+share the solver's state.
 """
 
 from __future__ import annotations

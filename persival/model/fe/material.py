@@ -11,6 +11,9 @@ The law is written once, per material point, and compiled with numba: the same f
 serves the public vectorized API below and the element kernel of the FE assembly, where a
 numpy formulation spends most of its time on 4th-order temporaries (see docs/fe_core.md for
 the measurements that motivated this).
+
+One module on purpose (a numerical kernel over 300 lines): the law and its consistent tangent
+are one compiled function per material point, and the vectorized API must stay beside it.
 """
 
 from __future__ import annotations

@@ -6,6 +6,10 @@ from 0 to 1; activation and prescribed displacements are interpolated along it
 the step is halved when Newton fails (divergence, an inverted element, a singular tangent)
 and grows again after easy steps. The linear algebra on the free DOFs (factorizations, their
 reuse, the condensed response) is persival.model.fe.free_dofs.
+
+One module on purpose (a numerical kernel over 300 lines): load stepping, Newton, the line
+search and the step control share one state (the current tangent, its factorization and the
+step history), which a split would have to pass back and forth.
 """
 
 from __future__ import annotations
