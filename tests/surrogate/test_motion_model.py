@@ -10,6 +10,7 @@ import pytest
 
 from persival.surrogate.least_effort import _moments_at, least_effort
 from persival.surrogate.motion_model import MotionActivationModel
+from persival.surrogate.motion_onnx import motion_probe
 from persival.tables.moment_table import MomentTable
 from persival.vocabulary import MUSCLES
 
@@ -132,7 +133,7 @@ def test_onnx_agrees_with_python_and_files_round_trip(model, tmp_path):
     assert entry["file"] == "activation_motion.onnx" and entry["input"] == "motion" and entry["max_load_kg"] > 0
     session = ort.InferenceSession(str(tmp_path / entry["file"]), providers=["CPUExecutionProvider"])
     assert [o.name for o in session.get_outputs()] == ["activations", "moment_deficit_Nmm"]
-    probe = model.probe(300, seed=3).astype(np.float32)
+    probe = motion_probe(model, 300, seed=3).astype(np.float32)
     got, deficit = session.run(None, {"motion": probe})
     ref, feasible, ref_deficit = model.predict(probe.astype(np.float64), with_deficit=True)
     assert got.shape == (300, 5) and got.dtype == np.float32 and deficit.shape == (300, 1)
