@@ -130,12 +130,13 @@ def test_no_import_circles():
     assert not circles, "import circles:\n" + "\n".join(sorted(set(circles)))
 
 
-def test_only_the_command_line_imports_typer():
-    """The library is used from Python as well: typer (the command line's parser) stays in persival.cli."""
+def test_only_the_command_line_imports_typer_and_rich():
+    """The library is used from Python as well: typer (the command line's parser) and rich (its
+    terminal output) stay in persival.cli; the library reports through persival.progress."""
     offenders = [f"{path.relative_to(PACKAGE.parent)}" for path, module in modules()
                  if not (module == "persival.cli" or module.startswith("persival.cli."))
-                 and re.search(r"^\s*(import typer|from typer)", path.read_text(), re.M)]
-    assert not offenders, "typer imported outside persival.cli: " + ", ".join(offenders)
+                 and re.search(r"^\s*(import (typer|rich)|from (typer|rich)[ .])", path.read_text(), re.M)]
+    assert not offenders, "typer or rich imported outside persival.cli: " + ", ".join(offenders)
 
 
 # Modules over 300 lines and functions over 60: each a numerical kernel (its docstring says why) or

@@ -40,7 +40,8 @@ def test_lines_when_not_a_terminal_also_while_a_step_takes_long():
 
 
 def test_progress_bar_prints_lines_to_a_log_file_with_a_heartbeat():
-    from persival.log_progress import LineProgress, progress_bar
+    from persival.cli.progress import rich_progress_bar as progress_bar
+    from persival.progress import LineProgress
 
     out = io.StringIO()
     console = Console(file=out, force_terminal=False, width=200)

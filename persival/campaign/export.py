@@ -67,11 +67,7 @@ def export_vtu(store: CampaignStore | str | Path, out_dir: str | Path, states=No
     }, indent=1))
     collection = ET.Element("VTKFile", type="Collection", version="0.1")
     datasets = ET.SubElement(collection, "Collection")
-    iterator = rows
-    if progress:
-        from rich.progress import track
-
-        iterator = track(rows, description="export")
+    iterator = _tracked(rows, "export") if progress else rows
     # Read surfaces in blocks of states: one zarr call per surface and block.
     block = 64
     files = []
@@ -92,3 +88,14 @@ def export_vtu(store: CampaignStore | str | Path, out_dir: str | Path, states=No
             files.append(name)
     ET.ElementTree(collection).write(out / "campaign.pvd", xml_declaration=True, encoding="utf-8")
     return {"out": str(out), "states": len(files), "files": files}
+
+
+def _tracked(items, description: str):
+    """``items`` one by one, advancing a progress bar (persival.progress)."""
+    from persival.progress import progress_bar
+
+    with progress_bar() as bar:
+        task = bar.add_task(description, total=len(items))
+        for item in items:
+            yield item
+            bar.advance(task)

@@ -165,7 +165,7 @@ def _run_inline(store, design, spec, factory, pending, record, tally, *, timeout
 
 
 class _Progress:
-    """A rich progress bar with rate and ETA, or nothing."""
+    """A progress bar with rate and ETA (persival.progress), or nothing."""
 
     def __init__(self, total: int, enabled: bool) -> None:
         self.total, self.enabled = total, enabled
@@ -173,32 +173,11 @@ class _Progress:
 
     def __enter__(self) -> _Progress:
         if self.enabled:
-            from rich.progress import (
-                BarColumn,
-                MofNCompleteColumn,
-                ProgressColumn,
-                TextColumn,
-                TimeElapsedColumn,
-                TimeRemainingColumn,
-            )
-            from rich.text import Text
+            from persival.progress import progress_bar
 
-            from persival.log_progress import progress_bar
-
-            class RateColumn(ProgressColumn):
-                def render(self, task):
-                    speed = task.finished_speed or task.speed
-                    if not speed:
-                        return Text("-- states/h", style="progress.data.speed")
-                    return Text(f"{speed * 3600:,.0f} states/h", style="progress.data.speed")
-
-            self._progress = progress_bar(
-                TextColumn("[bold]campaign"), BarColumn(), MofNCompleteColumn(),
-                TextColumn("{task.fields[info]}"), RateColumn(), TimeElapsedColumn(),
-                TextColumn("ETA"), TimeRemainingColumn(),
-            )
+            self._progress = progress_bar()
             self._progress.__enter__()
-            self._task = self._progress.add_task("campaign", total=self.total, info="")
+            self._task = self._progress.add_task("campaign", total=self.total, info="", rate_unit="states/h")
         return self
 
     def advance(self, tally: dict) -> None:

@@ -32,6 +32,9 @@ def main(
 
 
 def _register() -> None:
+    from persival.cli import progress
+
+    progress.install()  # the library's long calls draw rich bars on a terminal
     # Imported here so that `persival --help` stays fast and each stage stays independent.
     from persival.cli import bench as bench_commands
     from persival.cli import campaign as campaign_commands

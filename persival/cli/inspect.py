@@ -66,8 +66,8 @@ def curves(
     from rich.console import Console
     from rich.table import Table
 
+    from persival.cli.progress import rich_progress_bar as progress_bar
     from persival.evaluate.muscle_curves import REPORTED_SETS, band_check, muscle_curves, plot_curves, predicted_equilibrium
-    from persival.log_progress import progress_bar
     from persival.model.arm.arm_model import ArmModel
     from persival.model.arm.model_file import load_model_file
 

@@ -38,6 +38,8 @@ def register(app: typer.Typer) -> None:
             "(0: no limit). A run with failed sparse-grid states stops after the campaign and resumes from it."),
     ) -> None:
         """End to end: model -> FE -> campaign -> anatomy -> SG -> inverse -> data -> train -> export -> evaluate -> report."""
+        from rich.console import Console
+
         from persival.campaign.runner import CampaignIncomplete
         from persival.model.arm.body import ArmBody
         from persival.pipeline import RunConfig
@@ -69,7 +71,7 @@ def register(app: typer.Typer) -> None:
         created = not out.exists()
         try:
             with user_errors():
-                run_pipeline(out, config)
+                run_pipeline(out, config, Console())  # rich: rules, markup and live bars on a terminal
         except CampaignIncomplete as exc:
             fail(str(exc))
         except typer.Exit as exc:

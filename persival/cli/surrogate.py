@@ -137,7 +137,7 @@ def _progress_bar(description: str):
     """A rich progress bar and an ``advance(done, total, ...)`` callback for the stage functions."""
     from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 
-    from persival.log_progress import progress_bar
+    from persival.cli.progress import rich_progress_bar as progress_bar
 
     bar = progress_bar(TextColumn(description), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                    TextColumn("{task.fields[info]}"))

@@ -51,7 +51,7 @@ def tables(
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 
-    from persival.log_progress import progress_bar
+    from persival.cli.progress import rich_progress_bar as progress_bar
     from persival.model.arm.body import ArmBody
     from persival.tables.moment_table import TableMismatchError, check_grids
     from persival.tables.open import ensure_tables
@@ -207,7 +207,7 @@ def moments(
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 
-    from persival.log_progress import progress_bar
+    from persival.cli.progress import rich_progress_bar as progress_bar
     from persival.model.arm.arm_model import ArmModel
     from persival.model.arm.model_file import load_model_file
     from persival.tables.moment_table import build_moment_table, check_grids, resumable

@@ -76,17 +76,14 @@ def default_command(out, what: str = "evaluate") -> str:
 
 
 class _Steps:
-    """Rich progress for the long steps (or silence); ``progress`` True, False/None or a rich Progress."""
+    """Progress of the long steps (or silence); ``progress`` True, False/None or a progress object (persival.progress)."""
 
     def __init__(self, progress, console=None) -> None:
         self.own = progress is True
         if self.own:
-            from rich.progress import BarColumn, TextColumn, TimeElapsedColumn
+            from persival.progress import progress_bar
 
-            from persival.log_progress import progress_bar
-
-            progress = progress_bar(TextColumn("{task.description}"), BarColumn(),
-                                TextColumn("{task.completed:.0f}/{task.total:.0f}"), TimeElapsedColumn(), console=console)
+            progress = progress_bar(console=console)
         self.progress = progress or None
 
     def __enter__(self):

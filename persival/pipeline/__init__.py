@@ -112,8 +112,9 @@ def _stage_inputs(name: str, config: RunConfig, done: dict) -> dict:
 
 
 def run(out: str | Path, config: RunConfig | None = None, console=None) -> dict:
-    """Every stage in order; returns {stage: its summary}. ``console``: a rich Console for the log."""
-    from rich.console import Console
+    """Every stage in order; returns {stage: its summary}. ``console``: where the log goes (the
+    command line passes rich's Console; by default plain lines, persival.progress.PlainConsole)."""
+    from persival.progress import PlainConsole
 
     config = config or RunConfig()
     if config.model_hash is None:  # the model file's content is an input of every stage that reads it
@@ -122,7 +123,7 @@ def run(out: str | Path, config: RunConfig | None = None, console=None) -> dict:
         from persival.model.arm.model_file import load_model_file
 
         config = replace(config, model_hash=load_model_file(config.model)[1])
-    console = console or Console()
+    console = console or PlainConsole()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     done: dict[str, dict] = {}

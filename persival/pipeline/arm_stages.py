@@ -62,12 +62,9 @@ def tables(out: Path, config, console) -> dict:
     from persival.tables.open import ensure_tables
 
     t0 = time.perf_counter()
-    from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
+    from persival.progress import progress_bar
 
-    from persival.log_progress import progress_bar
-
-    with progress_bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                      console=console) as bar:
+    with progress_bar(console=console) as bar:
         task = bar.add_task("FE arm: meshing, rest states", total=None)
         table = ensure_tables(config.model, config.profile, None, lambda done, total: bar.update(
             task, completed=done, total=total, description="FE arm: response table columns (dask)"))

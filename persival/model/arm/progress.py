@@ -116,9 +116,7 @@ class ConsoleProgress:
 
     def _show(self, text: str) -> None:
         if self.status is not None:
-            from rich.text import Text  # plain text: an activation list in brackets is not markup
-
-            self.status.update(Text(text))
+            self.status.update(text.replace("[", "\\["))  # rich's escape: an activation list is not markup
         now = time.perf_counter()
         if (self.status is None or not self.console.is_terminal) and now - self._printed >= self.every_s:
             self.console.print(f"  {text}", highlight=False, markup=False, soft_wrap=True)  # a log line, not wrapped at 80

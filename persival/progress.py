@@ -1,33 +1,64 @@
-"""Progress that a log file shows.
+"""Progress of long library calls, and a console for calls made outside the command line.
 
-rich draws its bars only on a terminal; written to a file (``make run > run.log``, CI) a long
-stage is silent for minutes. :func:`progress_bar` returns rich's ``Progress`` on a terminal and
-otherwise a :class:`LineProgress` with the same calls (``add_task``, ``update``, ``advance``,
-``tasks``, context manager) that prints one line per unfinished task at least every
-``interval_s`` seconds (a heartbeat thread, so a task that takes minutes per step still shows
-it is alive) and a last line when it ends.
+The library says what it is doing through :func:`progress_bar` (rich's Progress calls:
+``add_task``, ``update``, ``advance``, ``tasks``, ``start``/``stop``, context manager); how it is
+drawn is the caller's. The command line installs rich's bars for a terminal
+(:func:`set_progress_factory`, persival.cli.progress); everywhere else (a log file, CI, the Python
+API) a :class:`LineProgress` prints one line per unfinished task at least every ``interval_s``
+seconds (a heartbeat thread, so a task that takes minutes per step still shows it is alive) and a
+last line when it ends. No library module imports rich.
 """
 
 from __future__ import annotations
 
+import re
 import threading
 import time
+from contextlib import contextmanager
 from types import SimpleNamespace
 
-__all__ = ["progress_bar", "LineProgress", "INTERVAL_S"]
+__all__ = ["INTERVAL_S", "LineProgress", "PlainConsole", "progress_bar", "set_progress_factory"]
 
 INTERVAL_S = 30.0
 
 
-def progress_bar(*columns, console=None, interval_s: float = INTERVAL_S, **kwargs):
-    """rich's Progress(*columns) on a terminal, a :class:`LineProgress` elsewhere."""
-    from rich.console import Console
-    from rich.progress import Progress
+_FACTORY = None
 
-    console = console or Console()
-    if console.is_terminal:
-        return Progress(*columns, console=console, **kwargs)
-    return LineProgress(console, interval_s)
+
+def set_progress_factory(factory) -> None:
+    """``factory(console=..., interval_s=...)`` -> a progress object: what :func:`progress_bar` returns."""
+    global _FACTORY
+    _FACTORY = factory
+
+
+def progress_bar(*, console=None, interval_s: float = INTERVAL_S):
+    """The installed factory's progress (the command line's rich bars), else a :class:`LineProgress`."""
+    if _FACTORY is not None:
+        return _FACTORY(console=console, interval_s=interval_s)
+    return LineProgress(console or PlainConsole(), interval_s)
+
+
+class PlainConsole:
+    """The console of a library call made outside the command line: rich-style markup
+    (``[dim]...[/dim]``) left out, one line per print, flushed."""
+
+    is_terminal = False
+    _TAG = re.compile(r"(?<!\\)\[/?[a-z#@][^\[\]]*\]")
+
+    def _plain(self, text) -> str:
+        return self._TAG.sub("", str(text)).replace("\\[", "[")
+
+    def print(self, *objects, markup: bool = True, **_) -> None:
+        text = " ".join(self._plain(o) if markup else str(o) for o in objects)
+        print(text, flush=True)
+
+    def rule(self, title: str = "", **_) -> None:
+        print(f"--- {self._plain(title)} ---", flush=True)
+
+    @contextmanager
+    def status(self, text: str = "", **_):
+        self.print(text)
+        yield SimpleNamespace(update=lambda *args, **kwargs: None)
 
 
 def _clock(seconds: float) -> str:
