@@ -34,6 +34,7 @@ import numpy as np
 from persival.file_header import check_header
 from persival.model.arm.muscle_state import MuscleState
 from persival.model.arm.state_cache import mesh_fingerprint
+from persival.tables.column_reuse import muscle_keys
 from persival.tables.moment_table import MomentTable, TableMismatchError, check_grids, empty_moment_table
 from persival.vocabulary import MUSCLES
 
@@ -98,6 +99,8 @@ class ResponseTable:
             "fine_dL": geometry.fine_dL.tolist(), "fine_gravity": geometry.fine_gravity.tolist(),
             "fine_joint": geometry.fine_joint.tolist(),
             "lengths_mm": [[arm.muscle_length(m, t)[0] for t in angles] for m in muscles],
+            # what each muscle's columns depend on: a table of another model with the same key has the same columns
+            "muscle_keys": muscle_keys(arm, angles, levels, VERSION),
         }
         _write_atomic(root / "header.json", json.dumps(header).encode())
         return cls(root, header)

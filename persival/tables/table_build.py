@@ -4,6 +4,7 @@ the elbow angle from the previous level's longest state, inline or one dask task
 
 from __future__ import annotations
 
+import logging
 import time
 from pathlib import Path
 
@@ -11,11 +12,14 @@ import numpy as np
 
 from persival.model.arm.muscle_state import MuscleState
 from persival.model.arm.state_cache import mesh_fingerprint
+from persival.tables.column_reuse import reuse_columns, table_headers
 from persival.tables.continuation import sweep_muscle
-from persival.tables.response_table import DEFAULT_ANGLES, DEFAULT_LEVELS, ResponseTable, default_table_dir
+from persival.tables.response_table import DEFAULT_ANGLES, DEFAULT_LEVELS, VERSION, ResponseTable, default_table_dir
 from persival.vocabulary import MUSCLES
 
 __all__ = ["build_muscle_columns", "build_response_table"]
+
+log = logging.getLogger(__name__)
 
 
 def _longest_state(table: ResponseTable, muscle: str, level: int) -> MuscleState | None:
@@ -50,17 +54,22 @@ def build_muscle_columns(model_file, profile: str, root: str, muscle: str) -> di
 
 def build_response_table(arm, root: str | Path | None = None, angles=DEFAULT_ANGLES, levels=DEFAULT_LEVELS,
                          model_file=None, scheduler: str | None = None, n_workers: int | None = None,
-                         progress=None, muscles=None) -> ResponseTable:
+                         progress=None, muscles=None, reuse_from=None) -> ResponseTable:
     """Build (or finish) the response tables of ``arm`` under ``root`` (default: the state cache).
 
     ``scheduler``: None starts a dask LocalCluster of ``n_workers`` single-threaded processes
     (default: one per core, at most one per muscle), ``"inline"`` computes here, an address uses
     a running cluster. ``progress(done_columns, total_columns)`` is called as columns finish.
-    ``muscles``: compute only these muscles' columns (the others stay unfinished).
+    ``muscles``: compute only these muscles' columns (the others stay unfinished). A muscle whose
+    columns another table holds under the same muscle key (persival.tables.column_reuse; by default
+    any table in the cache, or the table folders ``reuse_from``) takes them over instead.
     """
     root = Path(root) if root is not None else default_table_dir(arm)
     table = ResponseTable.create_or_open(root, arm, angles, levels)
     asked = MUSCLES if muscles is None else muscles
+    reused = reuse_columns(table, asked, table_headers(VERSION, reuse_from))
+    if reused:
+        log.info("columns taken over from tables with the same muscle keys: %s", reused)
     todo = [m for m in asked if not all(table.is_done(m, j) for j in range(len(table.levels)))]
     total = table.done.size
 

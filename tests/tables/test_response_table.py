@@ -257,3 +257,32 @@ def test_response_tables_answer_as_a_surrogate(arm, solver, tmp_path):
     with pytest.raises(ValueError, match="same arm"):
         ResponseTableSurrogate("coarse", tables=str(FIXTURE)).fit(
             Dataset(alpha, states, data.elbow_angles, surfaces, {"model_hash": "0" * 64}))
+
+
+@pytest.mark.slow
+def test_a_changed_muscle_rebuilds_only_its_own_columns(arm, tmp_path):
+    """The built-in file with the brachioradialis' bow changed is a new model (new hash, new table),
+    but the anconeus is the same FE problem: its columns are taken over, not solved again, and the
+    changed muscle's key differs."""
+    from persival.model.arm.arm_model import ArmModel
+    from persival.model.arm.defaults import default_model_path
+
+    grid = dict(angles=[55.0, 60.0], levels=[0.0, 1.0])
+    first = build_response_table(arm, tmp_path / "A", **grid, scheduler="inline", muscles=["anconeus"], reuse_from=[])
+    text = default_model_path().read_text()
+    start = text.index('name = "brachioradialis"')
+    bow = text.index("bow = 10.0", start)
+    changed = tmp_path / "changed_arm.toml"
+    changed.write_text(text[:bow] + "bow = 12.0" + text[bow + len("bow = 10.0"):])
+    other = ArmModel(changed, arm.profile)
+    assert other.model_hash != arm.model_hash
+
+    second = build_response_table(other, tmp_path / "B", **grid, scheduler="inline", muscles=["anconeus"],
+                                  reuse_from=[tmp_path / "A"])
+    keys_a, keys_b = first.header["muscle_keys"], second.header["muscle_keys"]
+    assert keys_a["anconeus"] == keys_b["anconeus"] and keys_a["brachioradialis"] != keys_b["brachioradialis"]
+    assert [keys_a[m] == keys_b[m] for m in ("biceps", "brachialis", "triceps")] == [True] * 3
+    for level in (0, 1):  # the very columns, seconds of compute included: copied, not solved again
+        a, b = first.column("anconeus", level), second.column("anconeus", level)
+        assert all(np.array_equal(a[k], b[k], equal_nan=True) for k in a)
+    assert not second.done[[0, 1, 2, 3]].any()
