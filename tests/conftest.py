@@ -21,23 +21,6 @@ SEED_CACHE = Path(__file__).parent / "data" / "state_cache"
 sys.path.insert(0, str(Path(__file__).parent))
 
 
-# The longest modules first (durations of a clean-clone `make test`): --dist loadfile hands out
-# whole modules in collection order, and a long module handed out last kept one worker busy while
-# the other idled (17.5 min of CPU in 11.3 min on 2 cores). The FE-arm modules alternate with
-# those that wait for the shared small run, so both workers start on work of their own.
-LONGEST_FIRST = ("tests/model/test_arm_solve.py", "tests/deploy/test_live_tracker.py",
-                 "tests/tables/test_response_table.py", "tests/model/test_contact.py", "tests/test_examples.py",
-                 "tests/deploy/test_live_webcam.py", "tests/tables/test_moment_table.py", "tests/deploy/test_viewer.py",
-                 "tests/model/test_muscle_contact.py", "tests/test_pipeline.py", "tests/deploy/test_contract.py",
-                 "tests/campaign/test_campaign.py", "tests/model/test_hinge.py", "tests/tables/test_hanging_arm_cache.py")
-
-
-def pytest_collection_modifyitems(config, items):
-    """Sort the modules longest first; a module's tests stay together and in their order (stable sort)."""
-    rank = {name: k for k, name in enumerate(LONGEST_FIRST)}
-    items.sort(key=lambda item: rank.get(item.nodeid.split("::")[0], len(rank)))
-
-
 def pytest_configure(config):
     """The on-disk state cache (persival.model.arm.state_cache) of a test run is a fresh folder of
     that run, shared by its xdist workers (they inherit the variable; entries are keyed by model

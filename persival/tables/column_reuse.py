@@ -16,8 +16,6 @@ import shutil
 from collections.abc import Iterable
 from pathlib import Path
 
-import numpy as np
-
 from persival.cache_dir import cache_root
 from persival.model.arm.model_file import PHYSICS_VERSION, SURFACE_VERSION
 from persival.model.arm.state_cache import mesh_fingerprint
@@ -66,8 +64,6 @@ def reuse_columns(table, muscles: Iterable[str], roots: Iterable[Path]) -> dict[
         for muscle in muscles:
             if not keys.get(muscle) or other.get("muscle_keys", {}).get(muscle) != keys[muscle]:
                 continue
-            if not np.array_equal(other["levels"], table.header["levels"]):
-                continue  # the key holds the grid; this guards against a hand-edited header
             for level in range(len(table.header["levels"])):
                 source = Path(root) / "columns" / f"{muscle}-{level}.npz"
                 if source.is_file() and not table.is_done(muscle, level):

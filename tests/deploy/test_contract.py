@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -124,19 +123,11 @@ browser_missing = not (Path(CHROMIUM).exists() and shutil.which("node") and (WEB
 
 @pytest.mark.skipif(browser_missing, reason="needs chromium, node and the built viewer (make web)")
 def test_the_page_gives_the_python_numbers(structured_export, model, requests):
-    from test_server import LiveServer
+    from test_server import run_page_script
 
-    from persival.deploy.server import create_app
 
-    server = LiveServer(create_app(structured_export))
-    try:
-        proc = subprocess.run(["node", str(ROOT / "tests" / "viewer" / "contract_check.mjs"), server.url + "/",
-                               json.dumps(requests.tolist())], capture_output=True, text=True, timeout=300)
-    finally:
-        server.stop()
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    result = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert result["ok"], result.get("error")
+    result = run_page_script(structured_export, ROOT / "tests" / "viewer" / "contract_check.mjs",
+                             json.dumps(requests.tolist()), timeout=300)
     assert result["consoleErrors"] == [] and result["pageErrors"] == []
     activations, angles = _python_answers(model, requests)
     page_a = np.array([r["activations"] for r in result["answers"]])

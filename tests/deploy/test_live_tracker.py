@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -40,9 +39,8 @@ def blank_video(path: Path, width: int = 320, height: int = 240, frames: int = 1
 
 @pytest.fixture(scope="module")
 def live_run(motion_export, tmp_path_factory):
-    from test_server import LiveServer
+    from test_server import run_page_script
 
-    from persival.deploy.server import create_app
 
     shots = Path(os.environ.get("PERSIVAL_VIEWER_SHOTS") or tmp_path_factory.mktemp("live_shots"))
     shots.mkdir(parents=True, exist_ok=True)
@@ -54,15 +52,7 @@ def live_run(motion_export, tmp_path_factory):
     config = {"video": str(blank_video(work / "blank.y4m")), "python": sys.executable, "client": str(CLIENT),
               "movement": movement, "movementMs": 1000 * PERIOD_S, "exercise": {"plan": PLAN, "client": exercise}}
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    server = LiveServer(create_app(motion_export))
-    try:
-        proc = subprocess.run(["node", str(SCRIPT), server.url + "/", str(shots), json.dumps(config)],
-                              capture_output=True, text=True, timeout=300, env=env)
-    finally:
-        server.stop()
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    result = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert result["ok"], result.get("error")
+    result = run_page_script(motion_export, SCRIPT, str(shots), json.dumps(config), timeout=300, env=env)
     result["shots"], result["work"] = str(shots), work
     return result
 

@@ -222,6 +222,25 @@ def motion_client(motion_export_dir):
         yield c
 
 
+def run_page_script(export: Path, script: Path, *args: str, timeout: float = 240, env: dict | None = None) -> dict:
+    """A browser script (tests/viewer/*.mjs) against a live server of ``export``: the JSON of its
+    last output line, checked to have run (exit 0, ``ok``)."""
+    import subprocess
+
+    from persival.deploy.server import create_app
+
+    server = LiveServer(create_app(export))
+    try:
+        proc = subprocess.run(["node", str(script), server.url + "/", *args], capture_output=True, text=True,
+                              timeout=timeout, env=env)
+    finally:
+        server.stop()
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert result["ok"], result.get("error")
+    return result
+
+
 @pytest.fixture(scope="module")
 def live(export_dir):
     from persival.deploy.server import create_app

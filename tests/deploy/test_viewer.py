@@ -12,12 +12,11 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
-from test_server import LiveServer, export_dir  # noqa: F401  (the one export fixture)
+from test_server import export_dir, run_page_script  # noqa: F401  (the one export fixture)
 
 from persival.deploy.server import WEB_DIST
 
@@ -37,19 +36,10 @@ pytestmark = [pytest.mark.skipif(bool(missing), reason=f"needs {', '.join(missin
 
 @pytest.fixture(scope="module")
 def browser_run(export_dir, tmp_path_factory):  # noqa: F811
-    from persival.deploy.server import create_app
 
     shots = Path(os.environ.get("PERSIVAL_VIEWER_SHOTS") or tmp_path_factory.mktemp("shots"))
     shots.mkdir(parents=True, exist_ok=True)
-    server = LiveServer(create_app(export_dir))
-    try:
-        proc = subprocess.run(["node", str(SCRIPT), server.url + "/", str(shots), json.dumps(ALPHAS), "4"],
-                              capture_output=True, text=True, timeout=240)
-    finally:
-        server.stop()
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    result = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert result["ok"], result.get("error")
+    result = run_page_script(export_dir, SCRIPT, str(shots), json.dumps(ALPHAS), "4")
     result["shots"] = str(shots)
     return result
 
@@ -110,20 +100,11 @@ def _recording_csv(lo: float = 20.0, hi: float = 130.0, duration: float = 4.0) -
 
 @pytest.fixture(scope="module")
 def session_run(motion_export, tmp_path_factory):
-    from persival.deploy.server import create_app
 
     shots = Path(os.environ.get("PERSIVAL_VIEWER_SHOTS") or tmp_path_factory.mktemp("session_shots"))
     shots.mkdir(parents=True, exist_ok=True)
     config = {"recording": _recording_csv(), "name": "cycle.csv", "angle": ANGLE, "light": LIGHT_KG, "heavyOver": 1.5}
-    server = LiveServer(create_app(motion_export))
-    try:
-        proc = subprocess.run(["node", str(SESSION), server.url + "/", str(shots), json.dumps(config)],
-                              capture_output=True, text=True, timeout=240)
-    finally:
-        server.stop()
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    result = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert result["ok"], result.get("error")
+    result = run_page_script(motion_export, SESSION, str(shots), json.dumps(config))
     result["shots"], result["config"] = str(shots), config
     return result
 
