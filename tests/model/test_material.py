@@ -112,6 +112,51 @@ def test_prestretch_moves_the_force_length_curve_and_nothing_else(prestretch):
         assert sigma[0][2, 2] - iso[2, 2] == pytest.approx(passive, rel=1e-9, abs=1e-15)
 
 
+@pytest.mark.parametrize("matrix", [0.85, 1.12])  # docs/theory.md 1.7: the matrix's stress-free stretch s
+@pytest.mark.parametrize("muscle_fraction", [1.0, 0.4])
+def test_consistent_tangent_with_a_matrix_prestretch(matrix, muscle_fraction):
+    rng = np.random.default_rng(int(matrix * 100) + int(muscle_fraction * 10))
+    n = 40
+    F, a0 = stretched_along_fibre(rng, n, 1.2)
+    act = rng.uniform(0.0, 1.0, n)
+    kw = dict(fibre_prestretch=1.1, matrix_prestretch=matrix)
+    S, CC = stress_and_tangent(F, a0, act, muscle_fraction, K_BULK, **kw)
+    assert np.abs(CC - CC.transpose(0, 3, 4, 1, 2)).max() <= 1e-12 * np.abs(CC).max()
+    assert np.abs(CC - CC.transpose(0, 2, 1, 3, 4)).max() <= 1e-12 * np.abs(CC).max()
+    assert np.abs(S - second_piola_kirchhoff(F, a0, act, muscle_fraction, K_BULK, **kw)).max() < 1e-14
+    h, worst = 1e-6, 0.0
+    for _ in range(4):
+        dF = rng.standard_normal((n, 3, 3))
+        fd = (second_piola_kirchhoff(F + h * dF, a0, act, muscle_fraction, K_BULK, **kw)
+              - second_piola_kirchhoff(F - h * dF, a0, act, muscle_fraction, K_BULK, **kw)) / (2 * h)
+        dC = 0.5 * (np.swapaxes(dF, 1, 2) @ F + np.swapaxes(F, 1, 2) @ dF)
+        analytic = np.einsum("nijkl,nkl->nij", CC, dC)
+        worst = max(worst, (np.linalg.norm(fd - analytic, axis=(1, 2)) / np.linalg.norm(analytic, axis=(1, 2))).max())
+    assert worst < 1e-6
+
+
+def test_the_matrix_is_stress_free_at_its_prestretch_and_objective():
+    """F0 = s M + s^(-1/2) (I - M) is the muscle matrix's stress-free state: S(F0) = 0 (s < 1 keeps
+    the fibre below its slack length), also rotated; the mesh pose F = I is then stretched
+    (s < 1: the matrix pulls along the fibre) or squeezed (s > 1: it pushes), and pure tendon is
+    not prestretched."""
+    rng = np.random.default_rng(7)
+    a0 = np.array([0.36, 0.48, 0.8])
+    M = np.outer(a0, a0)
+    for s in (0.8, 0.95):
+        F0 = s * M + s**-0.5 * (np.eye(3) - M)
+        assert np.abs(second_piola_kirchhoff(F0, a0, 0.0, 1.0, K_BULK, matrix_prestretch=s)).max() < 1e-13
+        R = random_rotation(rng)
+        assert np.abs(second_piola_kirchhoff(R @ F0, a0, 0.0, 1.0, K_BULK, matrix_prestretch=s)).max() < 1e-13
+    for s, sign in ((0.9, 1.0), (1.1, -1.0)):
+        S = second_piola_kirchhoff(np.eye(3), a0, 0.0, 1.0, K_BULK, matrix_prestretch=s)
+        assert sign * (a0 @ S @ a0) > 1e-3  # pulls (s < 1) or pushes (s > 1) along the fibre
+        tendon = second_piola_kirchhoff(np.eye(3), a0, 0.0, 0.0, K_BULK, matrix_prestretch=s)
+        assert np.abs(tendon).max() < 1e-14
+    with pytest.raises(ValueError, match="matrix_prestretch"):
+        second_piola_kirchhoff(np.eye(3), a0, 0.0, 1.0, K_BULK, matrix_prestretch=0.0)
+
+
 def test_force_length_relation_shape():
     p = DEFAULT_PARAMETERS
     f, df = force_length(np.array([p.lambda_opt, 1.0, 1.6]))

@@ -53,6 +53,8 @@ class Muscle(Strict):
     tendon_length: tuple[float, float] = Field(description="proximal, distal pure tendon (mm, mesh pose)")
     transition_length: float = Field(gt=0, description="muscle-tendon blend zone (mm)")
     fibre_prestretch: float = Field(1.0, gt=0.5, lt=2.0)
+    matrix_prestretch: float = Field(1.0, ge=0.7, le=1.4, description="the muscle matrix's stress-free length "
+                                     "over its mesh pose's, along the fibre, volume preserved (docs/theory.md 1.7)")
     bulk_modulus: tuple[float, float] = Field((100.0, 1000.0), description="muscle, tendon (MPa)")
     # Own anatomy (docs/own_anatomy.md): the muscle's shape from a closed surface
     # instead of the swept solid; belly_radius and bow then play no part.

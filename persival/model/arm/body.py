@@ -109,15 +109,16 @@ class ArmBody(ArmKinematics):
 
     def _material(self) -> MaterialField:
         n = self.mesh.n_cells
-        gamma, k, pre = np.empty(n), np.empty(n), np.empty(n)
+        gamma, k, pre, matrix = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
         for muscle in self.spec.ordered_muscles():
             cells = self.muscle_cells[muscle.name]
             _, g = muscle_profile(muscle, self.mesh.cell_data["arclength"][cells], self.body_length(muscle))
             gamma[cells] = g
             k[cells] = g * muscle.bulk_modulus[0] + (1.0 - g) * muscle.bulk_modulus[1]
             pre[cells] = muscle.fibre_prestretch
+            matrix[cells] = muscle.matrix_prestretch
         self.mesh.cell_data["muscle_fraction"] = gamma
-        return MaterialField.from_cells(4, self.mesh.cell_data["fibre"], gamma, k, pre)
+        return MaterialField.from_cells(4, self.mesh.cell_data["fibre"], gamma, k, pre, matrix_prestretch=matrix)
 
     def line_moment_arm(self, muscle: Muscle, theta_deg: float) -> float:
         """Moment arm (mm, flexion positive) of the straight origin-insertion line at theta: -dL/dtheta."""

@@ -83,7 +83,8 @@ class MuscleGroup:
         self.cells = np.cumsum([0] + [u.mesh.n_cells for u in units])
         fields = ("fibre", "muscle_fraction", "bulk_modulus", "fibre_prestretch")
         self.material = MaterialField(*(np.concatenate([getattr(u.material, k) for u in units]) for k in fields),
-                                      units[0].material.parameters)
+                                      units[0].material.parameters,
+                                      np.concatenate([u.material.matrix_stretch() for u in units]))
         self.faces = []
         surfaces = []
         for unit, offset in zip(units, self.offsets):

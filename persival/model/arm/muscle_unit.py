@@ -168,7 +168,8 @@ class MuscleUnit:
             return u
         obstacles = self.obstacles(self.mesh_angle_deg)
         self.contact.pose = lambda t: [Faded(obstacle, t) for obstacle in obstacles]
-        self.solver.material = replace(self.material, fibre_prestretch=np.ones_like(self.material.fibre_prestretch))
+        self.solver.material = replace(self.material, fibre_prestretch=np.ones_like(self.material.fibre_prestretch),
+                                       matrix_prestretch=None)
         try:
             return self.solver.solve(0.0, initial_displacement=u).displacement
         except ConvergenceError as exc:
@@ -178,14 +179,16 @@ class MuscleUnit:
             self._set_path(self.mesh_angle_deg, self.mesh_angle_deg)
 
     def _switch_on_prestretch(self, u: np.ndarray, progress=None) -> np.ndarray:
-        """Continuation of the fibre prestretch 1 -> lambda_0 at the mesh pose through the shares
-        0.6, 0.8, 0.9, 0.95, 0.98, 1 of it; a step where Newton fails is bisected (down to 1/64;
-        lambda_0 = 1.3 needs it on the coarse biceps)."""
+        """Continuation of the fibre prestretch 1 -> lambda_0 (and of the matrix's, 1 -> s,
+        docs/theory.md 1.7) at the mesh pose through the shares 0.6, 0.8, 0.9, 0.95, 0.98, 1 of
+        it; a step where Newton fails is bisected (down to 1/64; lambda_0 = 1.3 needs it on the
+        coarse biceps)."""
         full = self.material
         before, targets = 0.0, [0.6, 0.8, 0.9, 0.95, 0.98, 1.0]
         while targets:
             share = targets[0]
-            self.solver.material = replace(full, fibre_prestretch=1.0 + share * (full.fibre_prestretch - 1.0))
+            self.solver.material = replace(full, fibre_prestretch=1.0 + share * (full.fibre_prestretch - 1.0),
+                                           matrix_prestretch=1.0 + share * (full.matrix_stretch() - 1.0))
             report = None if progress is None else (lambda t, a=before, b=share: progress(a + t * (b - a)))
             try:
                 u = self.solver.solve(0.0, initial_displacement=u, progress=report).displacement

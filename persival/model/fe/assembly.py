@@ -40,6 +40,14 @@ class MaterialField:
     bulk_modulus: np.ndarray
     fibre_prestretch: np.ndarray
     parameters: MaterialParameters = DEFAULT_PARAMETERS
+    # the muscle matrix's stress-free stretch along the fibre (docs/theory.md, 1.7); None: 1 everywhere
+    matrix_prestretch: np.ndarray | None = None
+
+    def matrix_stretch(self) -> np.ndarray:
+        """The matrix prestretch at every quadrature point (ones when there is none)."""
+        if self.matrix_prestretch is None:
+            return np.ones_like(self.fibre_prestretch)
+        return self.matrix_prestretch
 
     @classmethod
     def from_cells(
@@ -51,6 +59,7 @@ class MaterialField:
         fibre_prestretch=1.0,
         n_cells: int | None = None,
         parameters: MaterialParameters = DEFAULT_PARAMETERS,
+        matrix_prestretch=1.0,
     ) -> MaterialField:
         fibre = np.asarray(fibre, dtype=float)
         m = n_cells if n_cells is not None else (len(fibre) if fibre.ndim == 2 else None)
@@ -77,7 +86,10 @@ class MaterialField:
         pre = per_point(fibre_prestretch, "fibre_prestretch")
         if np.any(pre <= 0):
             raise ValueError("fibre_prestretch must be positive")
-        return cls(np.repeat(fibre[:, None, :], n_quadrature, axis=1), gm, k, pre, parameters)
+        matrix = per_point(matrix_prestretch, "matrix_prestretch")
+        if np.any(matrix <= 0):
+            raise ValueError("matrix_prestretch must be positive")
+        return cls(np.repeat(fibre[:, None, :], n_quadrature, axis=1), gm, k, pre, parameters, matrix)
 
 
 class InvertedElementError(ArithmeticError):
@@ -152,7 +164,7 @@ class Tet10Assembler:
             Ke = np.empty((self.mesh.n_cells, 0, 0))
         bad = _element_kernel(
             ue, self.dN, self.weights, material.fibre, act, material.muscle_fraction, material.bulk_modulus,
-            material.fibre_prestretch, material.parameters.packed(), with_tangent, fe, Ke,
+            material.fibre_prestretch, material.matrix_stretch(), material.parameters.packed(), with_tangent, fe, Ke,
         )
         if bad:
             raise InvertedElementError(f"det F <= 0 in {bad} element(s)")
@@ -188,7 +200,7 @@ def _gather_sum(data, ptr, entries, values):
 
 
 @njit(cache=True, parallel=True)
-def _element_kernel(ue, dN, w, a0, act, gm, k, pre, p, with_tangent, fe, Ke):
+def _element_kernel(ue, dN, w, a0, act, gm, k, pre, mpre, p, with_tangent, fe, Ke):
     """Element internal forces and tangents of all cells (docs/theory.md, 2.2 weak form, module docstring).
 
     Returns the number of cells with det F <= 0 at some quadrature point.
@@ -214,7 +226,8 @@ def _element_kernel(ue, dN, w, a0, act, gm, k, pre, p, with_tangent, fe, Ke):
                     for a in range(10):
                         acc += ue[e, a, i] * g[a, J]
                     F[i, J] = acc
-            if _law_point(F, a0[e, q], act[e], gm[e, q], k[e, q], pre[e, q], p, S, CC, with_tangent) <= 0.0:
+            if _law_point(F, a0[e, q], act[e], gm[e, q], k[e, q], pre[e, q], p, S, CC, with_tangent,
+                          mpre[e, q]) <= 0.0:
                 failed = True
                 break
             wq = w[e, q]

@@ -35,14 +35,14 @@ class TissueParameters:
     c4: float
 
 
-# docs/theory.md, 1.7 (the paper's Table A).
+# docs/theory.md, 1.8 (the paper's Table A).
 MUSCLE = TissueParameters(c1=3.56e-2, c2=3.86e-3, c3=3.57e-8, c4=42.6)
 TENDON = TissueParameters(c1=2.31, c2=1.15e-6, c3=7.99, c4=16.6)
 
 
 @dataclass(frozen=True)
 class MaterialParameters:
-    """All parameters of the law except the bulk modulus (docs/theory.md, 1.7)."""
+    """All parameters of the law except the bulk modulus (docs/theory.md, 1.8)."""
 
     muscle: TissueParameters = field(default_factory=lambda: MUSCLE)
     tendon: TissueParameters = field(default_factory=lambda: TENDON)
@@ -94,8 +94,51 @@ def _passive_fibre_point(lam, c3, c4):
     return c3 * (lam ** (c4 - 2.0) - lam**-2.0), c3 * ((c4 - 2.0) * lam ** (c4 - 3.0) + 2.0 * lam**-3.0)
 
 
+@njit(cache=True, inline="always")
+def _matrix_inverse_prestretch(a0, s, G):
+    """G = F0^-1 of the matrix's stress-free configuration (docs/theory.md, 1.7): F0 = s M +
+    s^(-1/2) (I - M), a volume-preserving stretch s along the fibre; G is symmetric."""
+    along, across = 1.0 / s, math.sqrt(s)
+    for I in range(3):
+        for J in range(3):
+            G[I, J] = (along - across) * a0[I] * a0[J] + (across if I == J else 0.0)
+
+
 @njit(cache=True)
-def _law_point(F, a0, act, gm, k, pre, p, S, CC, with_tangent):
+def _pull_back(G, S, CC, with_tangent):
+    """S <- G S G and CC_IJKL <- G_Ia G_Jb G_Kc G_Ld CC_abcd (G symmetric): the matrix's stress and
+    tangent, computed in its stress-free configuration, brought back to the mesh pose (1.7)."""
+    T = np.empty((3, 3))
+    for I in range(3):
+        for b in range(3):
+            T[I, b] = G[I, 0] * S[0, b] + G[I, 1] * S[1, b] + G[I, 2] * S[2, b]
+    for I in range(3):
+        for J in range(3):
+            S[I, J] = T[I, 0] * G[0, J] + T[I, 1] * G[1, J] + T[I, 2] * G[2, J]
+    if not with_tangent:
+        return
+    A = np.empty((3, 3, 3, 3))
+    for axis in range(4):  # one index at a time: 4 x 243 products instead of 6561
+        for i in range(3):
+            for j in range(3):
+                for k in range(3):
+                    for m in range(3):
+                        acc = 0.0
+                        for c in range(3):
+                            if axis == 0:
+                                acc += G[i, c] * CC[c, j, k, m]
+                            elif axis == 1:
+                                acc += G[j, c] * CC[i, c, k, m]
+                            elif axis == 2:
+                                acc += G[k, c] * CC[i, j, c, m]
+                            else:
+                                acc += G[m, c] * CC[i, j, k, c]
+                        A[i, j, k, m] = acc
+        CC[:] = A
+
+
+@njit(cache=True)
+def _law_point(F, a0, act, gm, k, pre, p, S, CC, with_tangent, mpre=1.0):
     """S (3, 3) and, if asked, CC = 2 dS/dC (3, 3, 3, 3) at one point; returns det F."""
     C = np.empty((3, 3))
     for I in range(3):
@@ -108,6 +151,23 @@ def _law_point(F, a0, act, gm, k, pre, p, S, CC, with_tangent):
     )
     if Jdet <= 0.0:
         return Jdet
+    # docs/theory.md, 1.7: the matrix (isotropic and volumetric terms) sees C_m = G C G, G = F0^-1;
+    # the muscle's share gamma_M of the stretch, so pure tendon stays stress free in the mesh pose.
+    stretch = 1.0 + gm * (mpre - 1.0)
+    Cf = C  # the fibre terms always see the mesh pose's C
+    G = C  # only read when stretch != 1 (no allocation on the common path)
+    if stretch != 1.0:
+        G = np.empty((3, 3))
+        _matrix_inverse_prestretch(a0, stretch, G)
+        Cm = np.empty((3, 3))
+        for I in range(3):
+            for J in range(3):
+                acc = 0.0
+                for a in range(3):
+                    for b in range(3):
+                        acc += G[I, a] * C[a, b] * G[b, J]
+                Cm[I, J] = acc
+        C = Cm
     I3 = Jdet * Jdet
     I1 = C[0, 0] + C[1, 1] + C[2, 2]
     trC2 = 0.0
@@ -146,7 +206,7 @@ def _law_point(F, a0, act, gm, k, pre, p, S, CC, with_tangent):
     aCa = 0.0
     for I in range(3):
         for J in range(3):
-            aCa += a0[I] * C[I, J] * a0[J]
+            aCa += a0[I] * Cf[I, J] * a0[J]
     lam_T = math.sqrt(aCa)
     lam = pre * lam_T
     f, df = _force_length_point(lam, p)
@@ -159,9 +219,14 @@ def _law_point(F, a0, act, gm, k, pre, p, S, CC, with_tangent):
     b3v = B3 + g_vol
     for I in range(3):
         for J in range(3):
-            S[I, J] = B2 * C[I, J] + b3v * Ci[I, J] + phi * a0[I] * a0[J]
+            S[I, J] = B2 * C[I, J] + b3v * Ci[I, J]
         S[I, I] += B1
     if not with_tangent:
+        if stretch != 1.0:
+            _pull_back(G, S, CC, False)
+        for I in range(3):
+            for J in range(3):
+                S[I, J] += phi * a0[I] * a0[J]
         return Jdet
 
     # CC = 2 dS/dC collected by tensor structure (derivation in docs/fe_core.md):
@@ -191,18 +256,25 @@ def _law_point(F, a0, act, gm, k, pre, p, S, CC, with_tangent):
                         + a_vv * Ci[I, J] * Ci[K, L]
                         + 0.5 * B2 * (dIK * dJL + dIL * dJK)
                         - 0.5 * b3v * (Ci[I, K] * Ci[J, L] + Ci[I, L] * Ci[J, K])
-                        + a_mm * a0[I] * a0[J] * a0[K] * a0[L]
                     )
                     CC[I, J, K, L] = 2.0 * v
+    if stretch != 1.0:
+        _pull_back(G, S, CC, True)
+    for I in range(3):
+        for J in range(3):
+            S[I, J] += phi * a0[I] * a0[J]
+            for K in range(3):
+                for L in range(3):
+                    CC[I, J, K, L] += 2.0 * a_mm * a0[I] * a0[J] * a0[K] * a0[L]
     return Jdet
 
 
 @njit(cache=True, parallel=True)
-def _law_many(F, a0, act, gm, k, pre, p, S, CC, with_tangent):
+def _law_many(F, a0, act, gm, k, pre, mpre, p, S, CC, with_tangent):
     n = F.shape[0]
     bad = 0
     for i in prange(n):
-        if _law_point(F[i], a0[i], act[i], gm[i], k[i], pre[i], p, S[i], CC[i], with_tangent) <= 0.0:
+        if _law_point(F[i], a0[i], act[i], gm[i], k[i], pre[i], p, S[i], CC[i], with_tangent, mpre[i]) <= 0.0:
             bad += 1
     return bad
 
@@ -210,7 +282,7 @@ def _law_many(F, a0, act, gm, k, pre, p, S, CC, with_tangent):
 # --------------------------------------------------------------------------------------------
 # Public vectorized API.
 # --------------------------------------------------------------------------------------------
-def _prepare(F, a0, activation, muscle_fraction, bulk_modulus, fibre_prestretch, check):
+def _prepare(F, a0, activation, muscle_fraction, bulk_modulus, fibre_prestretch, matrix_prestretch, check):
     F = np.asarray(F, dtype=float)
     a0 = np.asarray(a0, dtype=float)
     if F.shape[-2:] != (3, 3):
@@ -219,10 +291,11 @@ def _prepare(F, a0, activation, muscle_fraction, bulk_modulus, fibre_prestretch,
         raise ValueError(f"a0 must have shape (..., 3), got {a0.shape}")
     lead = np.broadcast_shapes(
         F.shape[:-2], a0.shape[:-1], np.shape(activation), np.shape(muscle_fraction),
-        np.shape(bulk_modulus), np.shape(fibre_prestretch),
+        np.shape(bulk_modulus), np.shape(fibre_prestretch), np.shape(matrix_prestretch),
     )
     scal = lambda v: np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=float), lead)).reshape(-1)  # noqa: E731
-    act, gm, k, pre = (scal(v) for v in (activation, muscle_fraction, bulk_modulus, fibre_prestretch))
+    act, gm, k, pre, mpre = (scal(v) for v in (activation, muscle_fraction, bulk_modulus, fibre_prestretch,
+                                               matrix_prestretch))
     F = np.ascontiguousarray(np.broadcast_to(F, lead + (3, 3))).reshape(-1, 3, 3)
     a0 = np.ascontiguousarray(np.broadcast_to(a0, lead + (3,))).reshape(-1, 3)
     if check:
@@ -238,17 +311,21 @@ def _prepare(F, a0, activation, muscle_fraction, bulk_modulus, fibre_prestretch,
             raise ValueError("bulk_modulus must be finite and positive (MPa)")
         if not np.all(np.isfinite(pre)) or np.any(pre <= 0.0):
             raise ValueError("fibre_prestretch (lambda_0) must be finite and positive")
+        if not np.all(np.isfinite(mpre)) or np.any(mpre <= 0.0):
+            raise ValueError("matrix_prestretch must be finite and positive")
         if not np.allclose(np.linalg.norm(a0, axis=-1), 1.0, atol=1e-8):
             raise ValueError("fibre direction a0 must be a unit vector")
-    return lead, F, a0, act, gm, k, pre
+    return lead, F, a0, act, gm, k, pre, mpre
 
 
-def _run(F, a0, activation, muscle_fraction, bulk_modulus, fibre_prestretch, parameters, check, with_tangent):
-    lead, F, a0, act, gm, k, pre = _prepare(F, a0, activation, muscle_fraction, bulk_modulus, fibre_prestretch, check)
+def _run(F, a0, activation, muscle_fraction, bulk_modulus, fibre_prestretch, matrix_prestretch, parameters, check,
+         with_tangent):
+    lead, F, a0, act, gm, k, pre, mpre = _prepare(F, a0, activation, muscle_fraction, bulk_modulus, fibre_prestretch,
+                                                  matrix_prestretch, check)
     n = F.shape[0]
     S = np.empty((n, 3, 3))
     CC = np.empty((n, 3, 3, 3, 3) if with_tangent else (n, 1, 1, 1, 1))
-    bad = _law_many(F, a0, act, gm, k, pre, parameters.packed(), S, CC, with_tangent)
+    bad = _law_many(F, a0, act, gm, k, pre, mpre, parameters.packed(), S, CC, with_tangent)
     if bad:
         raise ValueError(f"det F <= 0 at {bad} point(s): inverted material (an element turned inside out)")
     return S.reshape(lead + (3, 3)), (CC.reshape(lead + (3, 3, 3, 3)) if with_tangent else None)
@@ -263,6 +340,7 @@ def second_piola_kirchhoff(
     fibre_prestretch=1.0,
     parameters: MaterialParameters = DEFAULT_PARAMETERS,
     check: bool = True,
+    matrix_prestretch=1.0,
 ) -> np.ndarray:
     """Second Piola-Kirchhoff stress S (MPa) of the muscle-tendon mixture, shape ``F.shape``.
 
@@ -270,10 +348,12 @@ def second_piola_kirchhoff(
     configuration; activation alpha in [0, 1], scalar or (...); muscle_fraction gamma_M in
     [0, 1] with gamma_ST = 1 - gamma_M; bulk_modulus k in MPa; fibre_prestretch lambda_0 (the
     muscle fibres' stretch in the mesh pose relative to their slack length, docs/theory.md, 1.6; the
-    tendon term is not prestretched). Every other parameter
-    comes from ``parameters`` (Table A by default).
+    tendon term is not prestretched); matrix_prestretch s: the muscle matrix's stress-free
+    configuration is the mesh pose stretched by s along the fibre, volume preserved
+    (docs/theory.md, 1.7). Every other parameter comes from ``parameters`` (Table A by default).
     """
-    return _run(F, a0, activation, muscle_fraction, bulk_modulus, fibre_prestretch, parameters, check, False)[0]
+    return _run(F, a0, activation, muscle_fraction, bulk_modulus, fibre_prestretch, matrix_prestretch, parameters,
+                check, False)[0]
 
 
 def stress_and_tangent(
@@ -285,9 +365,11 @@ def stress_and_tangent(
     fibre_prestretch=1.0,
     parameters: MaterialParameters = DEFAULT_PARAMETERS,
     check: bool = True,
+    matrix_prestretch=1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """S (..., 3, 3) and the consistent material tangent CC = 2 dS/dC (..., 3, 3, 3, 3)."""
-    return _run(F, a0, activation, muscle_fraction, bulk_modulus, fibre_prestretch, parameters, check, True)
+    return _run(F, a0, activation, muscle_fraction, bulk_modulus, fibre_prestretch, matrix_prestretch, parameters,
+                check, True)
 
 
 @njit(cache=True)
