@@ -115,6 +115,24 @@ def test_uniaxial_fibre_stretch_matches_analytic_stress(stretch, activation, mus
     assert solution.max_volume_change < 0.01  # nearly incompressible
 
 
+@pytest.mark.parametrize("matrix", [0.95, 1.05])
+def test_a_free_block_relaxes_to_its_matrix_prestretch(matrix):
+    """docs/theory.md 1.7: on rollers only, a muscle block whose matrix is stress free at F0 = s M +
+    s^(-1/2) (I - M) (fibre along x) takes that shape: 10 s mm long, 10 s^(-1/2) mm wide. The
+    passive fibre (lambda_0 = 0.9 keeps it slack) and the tendon-free block leave the matrix alone."""
+    mesh = box_mesh((2, 2, 2), (10.0, 10.0, 10.0))
+    sets = mesh.node_sets
+    rollers = [Dirichlet(name, sets[name], components=tuple(i == axis for i in range(3)))
+               for axis, name in enumerate(("x0", "y0", "z0"))]
+    material = MaterialField.from_cells(4, X_FIBRE, 1.0, 200.0, 0.9, n_cells=mesh.n_cells, matrix_prestretch=matrix)
+    solution = QuasiStaticSolver(mesh, material, rollers).solve(0.0)
+    u = solution.displacement.reshape(-1, 3)
+    np.testing.assert_allclose(u[sets["x1"], 0], 10.0 * (matrix - 1.0), atol=1e-6)
+    np.testing.assert_allclose(u[sets["y1"], 1], 10.0 * (matrix**-0.5 - 1.0), atol=1e-6)
+    np.testing.assert_allclose(u[sets["z1"], 2], 10.0 * (matrix**-0.5 - 1.0), atol=1e-6)
+    assert solution.max_volume_change < 1e-8
+
+
 @pytest.fixture(scope="module")
 def small_spindle():
     return spindle(length=80.0, belly_radius=8.0, tendon_radius=3.0, mesh_size=6.0, stations=15)
