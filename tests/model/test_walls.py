@@ -41,7 +41,7 @@ def test_septum_acts_only_in_its_band_and_keeps_each_side():
     class Wall:  # a model-file entry (persival.model.arm.model_file.Wall)
         name, kind, segment = "septum", "septum", "upper_arm"
         point, normal, along, band, ramp = (0.0, 30.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (40.0, 160.0), 20.0
-        turns = 0.0
+        turns, fades_deg = 0.0, None
 
     deep = np.array([[0.0, 20.0, 100.0], [3.0, 22.0, 120.0]])
     superficial = deep + [0.0, 25.0, 0.0]
@@ -87,7 +87,7 @@ def test_a_wall_that_turns_with_the_elbow_turns_about_its_pivot_smoothly():
     class Wall:  # a model-file entry that turns back with flexion about a pivot 140 mm up
         name, kind, segment = "septum", "septum", "upper_arm"
         point, normal, along, band, ramp = (0.0, 31.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (45.0, 140.0), 15.0
-        turns, turns_from_deg, pivot = -0.06, 60.0, (0.0, 31.0, 140.0)
+        turns, turns_from_deg, pivot, fades_deg = -0.06, 60.0, (0.0, 31.0, 140.0), None
 
     assert abs(turn_deg(Wall, 20.0)) < 0.02  # at rest it has barely turned (0.011 deg)
     assert turn_deg(Wall, 145.0) == pytest.approx(-0.06 * 85.0, abs=1e-3)  # beyond the onset: the fraction
@@ -113,4 +113,33 @@ def test_a_turning_wall_without_a_pivot_is_refused(tmp_path):
     assert edited != text
     (tmp_path / "arm.toml").write_text(edited)
     with pytest.raises(ModelFileError, match="anterior_septum.*needs a pivot"):
+        load_model_file(tmp_path / "arm.toml")
+
+
+def test_a_wall_that_fades_with_the_elbow_holds_then_lets_go_smoothly(tmp_path):
+    """``fades_deg`` = (a, b): the wall's penetration is whole up to a, none from b, a smoothstep
+    between (slope 0 at both ends); a falling range is refused with the wall named."""
+    from persival.model.anatomy.schema_base import ModelFileError
+    from persival.model.anatomy.walls import fade_share
+    from persival.model.arm.defaults import default_model_path
+    from persival.model.arm.model_file import load_model_file
+
+    class Wall:
+        name, kind, segment = "septum", "septum", "upper_arm"
+        point, normal, along, band, ramp = (0.0, 31.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (45.0, 140.0), 15.0
+        turns, turns_from_deg, pivot, fades_deg = 0.0, 60.0, None, (125.0, 145.0)
+
+    assert [fade_share(Wall, a) for a in (90.0, 125.0, 135.0, 145.0, 160.0)] == pytest.approx([1, 1, 0.5, 0, 0])
+    angles = np.linspace(120.0, 150.0, 301)
+    slope = np.gradient([fade_share(Wall, a) for a in angles], angles)
+    assert abs(slope[0]) < 1e-6 and abs(slope[-1]) < 1e-6 and slope.min() == pytest.approx(-1.875 / 20, rel=1e-2)
+    inside = np.array([[0.0, 26.0, 90.0]])  # 5 mm behind the plane, mid-band
+    depth = [wall_obstacles([Wall], np.zeros(3), np.array([1.0, 0, 0]), a, {})[0].project(inside)[0][0]
+             for a in (100.0, 135.0, 150.0)]
+    assert depth == pytest.approx([5.0, 2.5, 0.0])
+
+    text = (default_model_path().parent / "variants" / "atlas_walls.toml").read_text()
+    edited = text.replace("band = [45.0, 140.0]\n", "band = [45.0, 140.0]\nfades_deg = [140.0, 120.0]\n", 1)
+    (tmp_path / "arm.toml").write_text(edited)
+    with pytest.raises(ModelFileError, match="anterior_septum.*fades_deg must rise"):
         load_model_file(tmp_path / "arm.toml")

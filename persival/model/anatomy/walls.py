@@ -22,10 +22,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from persival.model.anatomy.obstacles import Capsule, _as_vector
+from persival.model.anatomy.obstacles import Capsule, Faded, _as_vector
 from persival.model.fe.rotations import rotation_about
 
-__all__ = ["Septum", "Sleeve", "turn_deg", "wall_obstacles"]
+__all__ = ["Septum", "Sleeve", "fade_share", "turn_deg", "wall_obstacles"]
 
 
 def _smoothstep(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -134,10 +134,19 @@ def turn_deg(wall, theta_deg: float, onset_deg: float = 10.0) -> float:
     return wall.turns * onset_deg * float(np.logaddexp(0.0, (theta_deg - wall.turns_from_deg) / onset_deg))
 
 
+def fade_share(wall, theta_deg: float) -> float:
+    """How much of a wall with ``fades_deg`` = (a, b) holds at elbow angle theta: 1 up to a, 0 from
+    b, a quintic smoothstep between (docs/theory.md 3.5), so the contact's angle rates stay smooth."""
+    if wall.fades_deg is None:
+        return 1.0
+    a, b = wall.fades_deg
+    return 1.0 - float(_smoothstep(np.array((theta_deg - a) / (b - a)))[0])
+
+
 def wall_obstacles(walls, centre, axis, theta_deg: float, sides: dict[str, float]) -> list:
     """The walls at elbow angle theta (forearm walls turn about the hinge, a wall with ``turns``
-    also about its pivot), each septum kept from the side ``sides[name]`` (+1: its normal's side,
-    -1: the other)."""
+    also about its pivot, one with ``fades_deg`` is scaled by its share), each septum kept from the
+    side ``sides[name]`` (+1: its normal's side, -1: the other)."""
     out = []
     for wall in walls:
         obstacle = wall_of(wall)
@@ -147,5 +156,6 @@ def wall_obstacles(walls, centre, axis, theta_deg: float, sides: dict[str, float
             obstacle = obstacle.transformed(rotation_about(axis, turn_deg(wall, theta_deg)), wall.pivot)
         if wall.segment == "forearm":
             obstacle = obstacle.transformed(rotation_about(axis, theta_deg), centre)
-        out.append(obstacle)
+        share = fade_share(wall, theta_deg)
+        out.append(obstacle if share == 1.0 else Faded(obstacle, share))
     return out
