@@ -137,6 +137,9 @@ def test_a_wall_that_fades_with_the_elbow_holds_then_lets_go_smoothly(tmp_path):
     depth = [wall_obstacles([Wall], np.zeros(3), np.array([1.0, 0, 0]), a, {})[0].project(inside)[0][0]
              for a in (100.0, 135.0, 150.0)]
     assert depth == pytest.approx([5.0, 2.5, 0.0])
+    faded = wall_obstacles([Wall], np.zeros(3), np.array([1.0, 0, 0]), 135.0, {})[0]
+    moved = faded.transformed(np.eye(3), np.zeros(3))  # a muscle's frame: the share goes along
+    assert moved.project(inside)[0][0] == pytest.approx(2.5)
 
     text = (default_model_path().parent / "variants" / "atlas_walls.toml").read_text()
     edited = text.replace("band = [45.0, 140.0]\n", "band = [45.0, 140.0]\nfades_deg = [140.0, 120.0]\n", 1)

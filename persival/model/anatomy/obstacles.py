@@ -133,6 +133,9 @@ class Faded:
         s = self.share
         return s * g, s * n, (lambda mask: s * dn_dx(mask))
 
+    def transformed(self, rotation: np.ndarray, centre) -> Faded:
+        return Faded(self.obstacle.transformed(rotation, centre), self.share)
+
 
 def bone_obstacles(bones, centre, axis, theta_deg: float, fields: dict | None = None) -> list:
     """Obstacles of model-file bones at elbow angle theta: their shaped surfaces where ``fields``
