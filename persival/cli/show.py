@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from persival.evaluate.anatomy import worst_cases
+from persival.evaluate.anatomy import limit_text, over_limit, worst_cases
 from persival.evaluate.bench_fe import FEBenchmark
 from persival.evaluate.bench_sparse_grid import BenchResult
 from persival.evaluate.tables import cell, grid
@@ -173,8 +173,8 @@ def _first(row: dict, keys: str, formats: dict) -> str:
     return "-"
 
 
-def _cell(depth: float, limit: float | None, text: str) -> str:
-    return f"[red]{text}[/red]" if limit is not None and depth > limit else text
+def _cell(over: bool, text: str) -> str:
+    return f"[red]{text}[/red]" if over else text
 
 
 def print_anatomy_tables(console, results: list[dict], per_state_columns: int = 5) -> None:
@@ -194,16 +194,17 @@ def print_anatomy_tables(console, results: list[dict], per_state_columns: int = 
         for column in ("states", "most nodes", "deepest (mm)", "in state"):
             table.add_column(column, justify="right")
     for entry in worst["overlaps"]:
-        a, b, limit = entry["body"], entry["inside"], entry["limit_mm"]
-        row = [a, b, "-" if limit is None else f"{limit:g}"]
+        a, b = entry["body"], entry["inside"]
+        row = [a, b, limit_text(a, b)]
         if few:
             for state in results:
                 hit = next((r for r in state["overlaps"] if (r["body"], r["inside"]) == (a, b)), None)
                 row.append("" if hit is None else
-                           _cell(hit["deepest_mm"], limit, f"{hit['nodes']}/{hit['of']}, {hit['deepest_mm']:.1f}"))
+                           _cell(over_limit(a, b, state["elbow_angle_deg"], hit["deepest_mm"]),
+                                 f"{hit['nodes']}/{hit['of']}, {hit['deepest_mm']:.1f}"))
         else:
             row += [str(entry["states"]), f"{entry['most_nodes']}/{entry['of']}",
-                    _cell(entry["deepest_mm"], limit, f"{entry['deepest_mm']:.1f}"),
+                    _cell(entry["over_states"] > 0, f"{entry['deepest_mm']:.1f}"),
                     f"{entry['deepest_state']} ({entry['deepest_angle_deg']:.0f} deg)"]
         table.add_row(*row)
     console.print(table)

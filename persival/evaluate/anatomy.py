@@ -23,12 +23,18 @@ from persival.model.arm.output import bone_surfaces
 from persival.model.fe.mesh import Tet10Mesh
 from persival.vocabulary import MUSCLES
 
-__all__ = ["check_state_dirs", "check_store", "pair_limit_mm", "worst_cases",
-           "write_json", "MUSCLE_BONE_LIMIT_MM", "MUSCLE_MUSCLE_LIMIT_MM"]
+__all__ = ["check_state_dirs", "check_store", "limit_text", "over_limit", "pair_limit_mm", "worst_cases", "write_json",
+           "FUNCTIONAL_ARC_DEG", "MUSCLE_BONE_LIMIT_MM", "MUSCLE_MUSCLE_LIMIT_MM", "TRICEPS_BED_LIMIT_MM"]
 
-# docs/design/arm_model_record.md: in any state, penetration muscle-bone <= 1 mm and muscle-muscle <= 2 mm
+# SPEC 3.3 (docs/arm_model.md, "How far bodies may reach into each other"): in the functional arc
+# (elbow <= 130 deg; daily activities need 30-130 deg, Morrey et al. 1981) penetration muscle-bone
+# <= 1 mm and muscle-muscle <= 2 mm; beyond it, where real flexion ends as soft tissue meets soft
+# tissue, 2 mm and 5 mm. The triceps' belly (its middle 60 %) lies within 10 mm of the humerus.
+FUNCTIONAL_ARC_DEG = 130.0
 MUSCLE_BONE_LIMIT_MM = 1.0
 MUSCLE_MUSCLE_LIMIT_MM = 2.0
+_LIMITS_MM = {False: {2: MUSCLE_MUSCLE_LIMIT_MM, 1: MUSCLE_BONE_LIMIT_MM}, True: {2: 5.0, 1: 2.0}}
+TRICEPS_BED_LIMIT_MM = 10.0
 
 
 def _muscle_ends(kinematics: ArmKinematics, theta_deg: float) -> dict[str, np.ndarray]:
@@ -112,10 +118,23 @@ def check_store(path, model_file=None, attachment_mm: float = 10.0, progress=Non
     return results
 
 
-def pair_limit_mm(a: str, b: str) -> float | None:
-    """The most one body may reach into the other: 1 mm muscle-bone, 2 mm muscle-muscle, none for two bones."""
+def pair_limit_mm(a: str, b: str, angle_deg: float | None = None) -> float | None:
+    """The most one body may reach into the other at elbow angle ``angle_deg``: in the functional
+    arc (or with no angle) 1 mm muscle-bone, 2 mm muscle-muscle; beyond it 2 and 5 mm; none for two bones."""
     muscles = (a in MUSCLES) + (b in MUSCLES)
-    return {2: MUSCLE_MUSCLE_LIMIT_MM, 1: MUSCLE_BONE_LIMIT_MM}.get(muscles)
+    return _LIMITS_MM[angle_deg is not None and angle_deg > FUNCTIONAL_ARC_DEG].get(muscles)
+
+
+def limit_text(a: str, b: str) -> str:
+    """A pair's limits as a table cell: the functional arc's, then beyond it ("-" for two bones)."""
+    inside, beyond = pair_limit_mm(a, b), pair_limit_mm(a, b, FUNCTIONAL_ARC_DEG + 1.0)
+    return "-" if inside is None else f"{inside:g} ({beyond:g} beyond {FUNCTIONAL_ARC_DEG:g} deg)"
+
+
+def over_limit(a: str, b: str, angle_deg: float, deepest_mm: float) -> bool:
+    """Whether one body reaches deeper into the other than its limit at that angle."""
+    limit = pair_limit_mm(a, b, angle_deg)
+    return limit is not None and deepest_mm > limit
 
 
 def worst_cases(results: list[dict]) -> dict:
@@ -125,8 +144,9 @@ def worst_cases(results: list[dict]) -> dict:
         for row in state["overlaps"]:
             key = (row["body"], row["inside"])
             entry = pairs.setdefault(key, {"body": key[0], "inside": key[1], "limit_mm": pair_limit_mm(*key), "states": 0,
-                                           "most_nodes": 0, "of": row["of"], "deepest_mm": 0.0})
+                                           "most_nodes": 0, "of": row["of"], "deepest_mm": 0.0, "over_states": 0})
             entry["states"] += 1
+            entry["over_states"] += over_limit(*key, state["elbow_angle_deg"], row["deepest_mm"])
             entry["most_nodes"] = max(entry["most_nodes"], row["nodes"])
             if row["deepest_mm"] > entry["deepest_mm"]:
                 entry.update(deepest_mm=row["deepest_mm"], deepest_state=state["state"],

@@ -166,6 +166,30 @@ def test_the_run_table_counts_a_pair_once_per_state_against_its_limit():
     assert rows["triceps off its bed (humerus)"]["fe_mm"] == 4.3 and rows["triceps off its bed (humerus)"]["held_mm"] == 4.9
 
 
+def test_beyond_the_functional_arc_the_limits_widen_and_the_triceps_bed_is_limited():
+    """SPEC 3.3: at 140 deg muscle-muscle may reach 5 mm and muscle-bone 2 mm (3.0 and 1.5 mm are
+    within), at 130 deg the arc's 2 and 1 mm hold (the same depths are over); a triceps belly 12 mm
+    off the humerus is over its 10 mm in any state."""
+    from persival.evaluate.anatomy import limit_text, pair_limit_mm
+    from persival.evaluate.anatomy_run import anatomy_table
+
+    assert [pair_limit_mm("biceps", "brachialis", a) for a in (None, 130.0, 130.5)] == [2.0, 2.0, 5.0]
+    assert [pair_limit_mm("biceps", "humerus", a) for a in (None, 130.0, 140.0)] == [1.0, 1.0, 2.0]
+    assert pair_limit_mm("radius", "ulna", 140.0) is None and limit_text("biceps", "radius") == "1 (2 beyond 130 deg)"
+
+    def state(name, theta, gap):
+        return {"state": name, "elbow_angle_deg": theta, "overlaps": [
+            {"body": "biceps", "inside": "brachialis", "nodes": 3, "of": 100, "deepest_mm": 3.0},
+            {"body": "biceps", "inside": "humerus", "nodes": 3, "of": 100, "deepest_mm": 1.5}],
+            "bed_gaps": [{"muscle": "triceps", "bed": ["humerus"], "largest_gap_mm": gap, "at_fraction": 0.5}]}
+
+    table = anatomy_table([state("flexed", 140.0, 4.0), state("arc", 130.0, 4.0)], [state("held_out/0", 140.0, 12.0)], "arm")
+    rows = {r["pair"]: r for r in table["rows"]}
+    assert rows["biceps in brachialis"]["over"] == "1/3" and rows["biceps in humerus"]["over"] == "1/3"
+    assert rows["triceps off its bed (humerus)"]["over"] == "1/3" and rows["triceps off its bed (humerus)"]["limits"] == "10"
+    assert table["states_within_limits"] == 1 and table["pair_states_over_limit"] == 3
+
+
 def test_outlines_are_the_muscles_cross_sections_and_overlaps_are_refused_by_name():
     """The model file's outlines across the humerus (before meshing): where a centre line runs
     nearly along the humerus its outline is a circle of the station's radius about it; the
