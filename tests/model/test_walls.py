@@ -41,7 +41,7 @@ def test_septum_acts_only_in_its_band_and_keeps_each_side():
     class Wall:  # a model-file entry (persival.model.arm.model_file.Wall)
         name, kind, segment = "septum", "septum", "upper_arm"
         point, normal, along, band, ramp = (0.0, 30.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (40.0, 160.0), 20.0
-        turns, fades_deg = 0.0, None
+        turns, fades_deg, gives_mm = 0.0, None, 0.0
 
     deep = np.array([[0.0, 20.0, 100.0], [3.0, 22.0, 120.0]])
     superficial = deep + [0.0, 25.0, 0.0]
@@ -87,7 +87,7 @@ def test_a_wall_that_turns_with_the_elbow_turns_about_its_pivot_smoothly():
     class Wall:  # a model-file entry that turns back with flexion about a pivot 140 mm up
         name, kind, segment = "septum", "septum", "upper_arm"
         point, normal, along, band, ramp = (0.0, 31.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (45.0, 140.0), 15.0
-        turns, turns_from_deg, pivot, fades_deg = -0.06, 60.0, (0.0, 31.0, 140.0), None
+        turns, turns_from_deg, pivot, fades_deg, gives_mm = -0.06, 60.0, (0.0, 31.0, 140.0), None, 0.0
 
     assert abs(turn_deg(Wall, 20.0)) < 0.02  # at rest it has barely turned (0.011 deg)
     assert turn_deg(Wall, 145.0) == pytest.approx(-0.06 * 85.0, abs=1e-3)  # beyond the onset: the fraction
@@ -127,7 +127,7 @@ def test_a_wall_that_fades_with_the_elbow_holds_then_lets_go_smoothly(tmp_path):
     class Wall:
         name, kind, segment = "septum", "septum", "upper_arm"
         point, normal, along, band, ramp = (0.0, 31.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (45.0, 140.0), 15.0
-        turns, turns_from_deg, pivot, fades_deg = 0.0, 60.0, None, (125.0, 145.0)
+        turns, turns_from_deg, pivot, fades_deg, gives_mm = 0.0, 60.0, None, (125.0, 145.0), 0.0
 
     assert [fade_share(Wall, a) for a in (90.0, 125.0, 135.0, 145.0, 160.0)] == pytest.approx([1, 1, 0.5, 0, 0])
     angles = np.linspace(120.0, 150.0, 301)
@@ -146,3 +146,21 @@ def test_a_wall_that_fades_with_the_elbow_holds_then_lets_go_smoothly(tmp_path):
     (tmp_path / "arm.toml").write_text(edited)
     with pytest.raises(ModelFileError, match="anterior_septum.*fades_deg must rise"):
         load_model_file(tmp_path / "arm.toml")
+
+
+def test_a_septum_that_gives_way_moves_away_from_the_muscle_it_holds():
+    """``gives_mm`` over ``gives_deg``: kept from either side, the plane moves by the smoothstep's
+    share of gives_mm towards the other side (the muscle it holds may go that much further)."""
+    from persival.model.anatomy.walls import give_mm
+
+    class Wall:
+        name, kind, segment = "septum", "septum", "upper_arm"
+        point, normal, along, band, ramp = (0.0, 31.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (45.0, 140.0), 15.0
+        turns, fades_deg, gives_mm, gives_deg = 0.0, None, 5.0, (120.0, 140.0)
+
+    assert [give_mm(Wall, a) for a in (100.0, 130.0, 150.0)] == pytest.approx([0.0, 2.5, 5.0])
+    origin, axis = np.zeros(3), np.array([1.0, 0.0, 0.0])
+    behind, ahead = np.array([[0.0, 28.0, 90.0]]), np.array([[0.0, 34.0, 90.0]])  # 3 mm past the plane either way
+    for theta, depth in ((100.0, 3.0), (150.0, -2.0)):  # 5 mm given: 2 mm clear
+        assert wall_obstacles([Wall], origin, axis, theta, {"septum": 1.0})[0].project(behind)[0][0] == pytest.approx(depth)
+        assert wall_obstacles([Wall], origin, axis, theta, {"septum": -1.0})[0].project(ahead)[0][0] == pytest.approx(depth)

@@ -86,6 +86,9 @@ class Wall(Strict):
     turns_from_deg: float = Field(60.0, description="deg: the elbow angle from which the wall turns (a smooth onset "
                                   "over about 10 deg)")
     pivot: Vector | None = Field(None, description="a point of the axis the wall turns about (mm; required with turns)")
+    gives_mm: float = Field(0.0, ge=0, description="septum: mm it gives way (moves along its normal, away from the "
+                            "muscle it holds) over gives_deg, a smoothstep in the angle (docs/theory.md 3.5)")
+    gives_deg: tuple[float, float] = Field((120.0, 140.0), description="elbow angles (deg) over which a septum gives way")
     fades_deg: tuple[float, float] | None = Field(None, description="elbow angles (deg) over which the wall fades out "
                                                   "(its penetration scaled by a smoothstep from 1 to 0; docs/theory.md "
                                                   "3.5, 'Walls that fade with the elbow'); none: it holds at every angle")
@@ -98,6 +101,8 @@ class Wall(Strict):
             raise ValueError(f"wall {self.name!r}: a {self.kind} needs {', '.join(missing)}")
         if self.turns != 0 and self.pivot is None:
             raise ValueError(f"wall {self.name!r}: a wall that turns (turns = {self.turns:g}) needs a pivot")
+        if not self.gives_deg[0] < self.gives_deg[1]:
+            raise ValueError(f"wall {self.name!r}: gives_deg must rise (from, to), got {list(self.gives_deg)}")
         if self.fades_deg is not None and not self.fades_deg[0] < self.fades_deg[1]:
             raise ValueError(f"wall {self.name!r}: fades_deg must rise (from, to), got {list(self.fades_deg)}")
         if self.kind == "septum" and self.band[1] - self.band[0] < 2 * self.ramp:

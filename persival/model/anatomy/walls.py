@@ -25,7 +25,7 @@ import numpy as np
 from persival.model.anatomy.obstacles import Capsule, Faded, _as_vector
 from persival.model.fe.rotations import rotation_about
 
-__all__ = ["Septum", "Sleeve", "fade_share", "turn_deg", "wall_obstacles"]
+__all__ = ["Septum", "Sleeve", "fade_share", "give_mm", "turn_deg", "wall_obstacles"]
 
 
 def _smoothstep(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -78,6 +78,10 @@ class Septum:
             return dw[mask][:, None, None] * cross[None] - (depth[mask] * ddw[mask])[:, None, None] * a_a[None]
 
         return g, n, dn_dx
+
+    def shifted(self, distance: float) -> Septum:
+        """The same septum moved ``distance`` mm against its normal (it gives way to what it holds)."""
+        return Septum(self.point - distance * self.normal, self.normal, self.along, self.band, self.ramp, self.name)
 
     def flipped(self) -> Septum:
         """The same plane, kept from the other side."""
@@ -134,13 +138,22 @@ def turn_deg(wall, theta_deg: float, onset_deg: float = 10.0) -> float:
     return wall.turns * onset_deg * float(np.logaddexp(0.0, (theta_deg - wall.turns_from_deg) / onset_deg))
 
 
+def _ramp(theta_deg: float, span: tuple[float, float]) -> float:
+    """A quintic smoothstep in the angle: 0 up to span[0], 1 from span[1]."""
+    a, b = span
+    return float(_smoothstep(np.array((theta_deg - a) / (b - a)))[0])
+
+
+def give_mm(wall, theta_deg: float) -> float:
+    """How far a septum with ``gives_mm`` has moved away from the muscle it holds at elbow angle
+    theta (docs/theory.md 3.5): none up to gives_deg[0], all of it from gives_deg[1]."""
+    return 0.0 if wall.gives_mm == 0 else wall.gives_mm * _ramp(theta_deg, wall.gives_deg)
+
+
 def fade_share(wall, theta_deg: float) -> float:
     """How much of a wall with ``fades_deg`` = (a, b) holds at elbow angle theta: 1 up to a, 0 from
     b, a quintic smoothstep between (docs/theory.md 3.5), so the contact's angle rates stay smooth."""
-    if wall.fades_deg is None:
-        return 1.0
-    a, b = wall.fades_deg
-    return 1.0 - float(_smoothstep(np.array((theta_deg - a) / (b - a)))[0])
+    return 1.0 if wall.fades_deg is None else 1.0 - _ramp(theta_deg, wall.fades_deg)
 
 
 def wall_obstacles(walls, centre, axis, theta_deg: float, sides: dict[str, float]) -> list:
@@ -152,6 +165,8 @@ def wall_obstacles(walls, centre, axis, theta_deg: float, sides: dict[str, float
         obstacle = wall_of(wall)
         if isinstance(obstacle, Septum) and sides.get(wall.name, 1.0) < 0:
             obstacle = obstacle.flipped()
+        if isinstance(obstacle, Septum) and wall.gives_mm:
+            obstacle = obstacle.shifted(give_mm(wall, theta_deg))
         if wall.turns != 0:
             obstacle = obstacle.transformed(rotation_about(axis, turn_deg(wall, theta_deg)), wall.pivot)
         if wall.segment == "forearm":
