@@ -48,6 +48,9 @@ def test_default_model_loads_with_five_muscles():
          'insertion_tie = "forearm"', "forearm-tied insertion face"),
         ('insertion = [2.0, -2.0, -45.0]\nwrap_radius = 7.0', 'insertion = [2.0, -2.0, -45.0]\ninsertion_tie = "bone"',
          "insertion_tie"),
+        # a list entry is named by its name: one line that says which muscle
+        ('insertion = [2.0, -2.0, -45.0]\nwrap_radius = 7.0', 'insertion = [2.0, -2.0, -45.0]\nwrap_radius = 7.0\n'
+         'matrix_prestretch = 1.9', "muscles\\[biceps\\]\\.matrix_prestretch: Input should be less than or equal to 1.4"),
     ],
 )
 def test_bad_model_files_are_refused(tmp_path, old, new, message):

@@ -43,6 +43,21 @@ def model_hash(text: str, surfaces: dict[str, bytes] | None = None) -> str:
     return hashlib.sha256("\n".join(lines).encode()).hexdigest()
 
 
+def _where(data: dict, loc: tuple) -> str:
+    """A validation error's place in the file, entries of a list named by their ``name``:
+    ``muscles.3.matrix_prestretch`` -> ``muscles[triceps].matrix_prestretch``."""
+    parts, node = [], data
+    for key in loc:
+        if isinstance(key, int) and isinstance(node, list) and key < len(node):
+            node = node[key]
+            name = node.get("name") if isinstance(node, dict) else None
+            parts[-1] += f"[{name}]" if name and parts else f"[{key}]"
+            continue
+        node = node.get(key) if isinstance(node, dict) else None
+        parts.append(str(key))
+    return ".".join(parts) or "<file>"
+
+
 def load_model_file(path: str | Path | None = None) -> tuple[ArmModelFile, str]:
     """Read and validate a model file: a path, or the name of a packaged model (the built-in arm
     when ``path`` is None; ``persival model list``).
@@ -63,7 +78,7 @@ def load_model_file(path: str | Path | None = None) -> tuple[ArmModelFile, str]:
     try:
         model = ArmModelFile.model_validate(data)
     except ValidationError as exc:
-        lines = [f"{'.'.join(str(p) for p in e['loc']) or '<file>'}: {e['msg']}" for e in exc.errors()]
+        lines = [f"{_where(data, e['loc'])}: {e['msg']}" for e in exc.errors()]
         raise ModelFileError(f"{path}: invalid model file:\n  " + "\n  ".join(lines)) from None
     model, surfaces = _resolve_surfaces(model, path)
     return model, model_hash(text, surfaces)
