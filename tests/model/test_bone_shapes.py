@@ -110,7 +110,7 @@ def test_a_model_file_sets_the_shape_and_keeps_its_defaults(tmp_path):
     assert spec.bone("humerus").drawn_shape().trochlea_width == 22.0
     assert load_model_file()[0].bone("ulna").drawn_shape().kind == "ulna"  # by name, without a table
     custom.write_text(text.replace(marker, marker + '[bones.shape]\nkind = "femur"\n'))
-    with pytest.raises(ModelFileError, match="bones.0.shape"):
+    with pytest.raises(ModelFileError, match=r"bones\[humerus\]\.shape"):
         load_model_file(custom)
 
 
