@@ -75,9 +75,26 @@ def tables(out: Path, config, console) -> dict:
     console.print(f"  {table.root}: {len(table.angles_deg)} angles x {len(table.levels)} levels x 5 muscles, "
                   f"{failed} failed solves, converged over {lo:g}-{hi:g} deg; {table.build_seconds():.0f} s of "
                   f"column compute (once per model), {time.perf_counter() - t0:.0f} s this run")
+    pushes = _pushes(moments, config.model, console)
     return {"root": str(table.root), "angles_deg": table.angles_deg.tolist(), "levels": table.levels.tolist(),
             "failed_solves": failed, "range_deg": [lo, hi], "column_compute_s": table.build_seconds(),
-            "moments": str(out / "tables" / "moments.npz")}
+            "moments": str(out / "tables" / "moments.npz"), "pushes": pushes}
+
+
+def _pushes(moments, model, console) -> dict:
+    """SPEC 3.3's "no muscle pushes" on the tables (persival.tables.push_check), said in one line."""
+    from persival.model.arm.model_file import load_model_file
+    from persival.tables.push_check import push_check
+
+    spec, _ = load_model_file(model)
+    report = push_check(moments, tuple(m.name for m in spec.muscles if m.action == "extensor"))
+    bad = [f"{name} pushes {report['muscles'][name]['least_tension_N']:.1f} N at "
+           f"{report['muscles'][name]['at_deg']:g} deg" for name in report["pushing"]]
+    bad += [f"passive {name} flexes {report['muscles'][name]['passive_moment_max_Nmm']:.0f} N mm at "
+            f"{report['muscles'][name]['passive_moment_at_deg']:g} deg" for name in report["passive_extensors_flexing"]]
+    console.print("  no muscle pushes" if not bad else f"  [yellow]{'; '.join(bad)}[/yellow] (SPEC 3.3: a muscle "
+                  f"pulls, at least {report['limit_N']:g} N, and a passive extensor never flexes)")
+    return report
 
 
 def fe(out: Path, config, console) -> dict:

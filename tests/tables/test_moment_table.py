@@ -104,3 +104,36 @@ def test_fe_columns_resume_after_a_kill_and_agree_with_the_fixture(table, tmp_pa
         expected = table.tension[3][np.ix_(rows, [0, -1])]
         assert np.allclose(result.tension[3], expected, rtol=1e-4, atol=1e-3)
     shutil.rmtree(tmp_path, ignore_errors=True)
+
+
+def test_the_push_check_finds_the_built_in_arms_pushing_muscles_and_passes_a_pulling_table(table):
+    """SPEC 3.3 "no muscle pushes": on the coarse built-in arm every muscle's least tension is
+    below -2 N somewhere (the slack brachialis -20.6 N at 160 deg, the passive triceps -8.9 N at
+    0 deg) and both passive extensors flex the elbow; with every tension a pull and the passive
+    extensors' moments turned to extension the check passes."""
+    from persival.tables.push_check import push_check
+
+    report = push_check(table)
+    assert report["pushing"] == list(MUSCLES) and report["passive_extensors_flexing"] == ["triceps", "anconeus"]
+    brachialis, triceps = report["muscles"]["brachialis"], report["muscles"]["triceps"]
+    assert brachialis["least_tension_N"] == pytest.approx(np.nanmin(table.tension[1])) and brachialis["least_tension_N"] < -2.0
+    assert brachialis["at_deg"] == 160.0 and triceps["at_deg"] == 0.0 and triceps["at_level"] == 0.0
+    assert triceps["passive_moment_max_Nmm"] == pytest.approx(np.nanmax(table.moments[3, :, 0]))
+    assert triceps["passive_moment_max_Nmm"] > 0.0
+    moments = table.moments.copy()
+    moments[3:, :, 0] = -np.abs(moments[3:, :, 0])
+    pulling = replace(table, tension=np.abs(table.tension), moments=moments)
+    clean = push_check(pulling)
+    assert clean["pushing"] == [] and clean["passive_extensors_flexing"] == []
+
+
+def test_the_tables_stage_says_which_muscles_push(table, capsys):
+    """The run's tables stage reports the check in one line, with the extensors from the model file."""
+    from persival.pipeline.arm_stages import _pushes
+    from persival.progress import PlainConsole
+
+    report = _pushes(table, None, PlainConsole())
+    line = capsys.readouterr().out
+    assert report["passive_extensors_flexing"] == ["triceps", "anconeus"]
+    assert "brachialis pushes -20.6 N at 160 deg" in line and "passive triceps flexes 188 N mm at 20 deg" in line
+    assert "SPEC 3.3" in line and line.count("\n") == 1
