@@ -85,20 +85,25 @@ def test_contact_patch_test(contact_points, capsys):
     assert depth[100.0] / depth[10.0] == pytest.approx(0.1, rel=1e-8)
 
 
-@pytest.mark.parametrize("contact_points", ["on_faces", "at_nodes"])
-def test_contact_tangent_matches_finite_differences(contact_points):
+@pytest.mark.parametrize("contact_points, smoothing", [("on_faces", 0.0), ("at_nodes", 0.0), ("on_faces", 0.4)])
+def test_contact_tangent_matches_finite_differences(contact_points, smoothing):
     """Perturbed block nodes penetrating a cylinder (shaft and end cap) and a half-space: the
-    tangent is the central difference of the force, the force that of the energy."""
+    tangent is the central difference of the force, the force that of the energy; also with the
+    stiffness ramped over the first 0.4 mm (docs/theory.md 3.5), where many of these points are."""
     mesh = box_mesh((2, 2, 2), (10.0, 10.0, 10.0))
     rng = np.random.default_rng(0)
     x0 = mesh.points + 0.3 * rng.standard_normal(mesh.points.shape)
     cylinder = Capsule([-2.0, 5.0, -6.0], [7.0, 5.0, -6.0], 7.0, "cylinder")  # ends at x = 7: cap region
     lid = HalfSpace([0.0, 0.0, 10.2], [0.0, 0.0, -1.0], "lid")
     contact = getattr(ObstacleContact, contact_points)(mesh, [cylinder, lid], 3.0)
+    contact.smoothing_mm = smoothing
     xp = contact.points(x0)
     active_cylinder = cylinder.project(xp)[0] > 0
     assert active_cylinder.sum() >= 5 and np.any(active_cylinder & (xp[:, 0] > 7.0))  # shaft and cap
     assert np.any(lid.project(xp)[0] > 0)
+    if smoothing:
+        depth = contact.penetration(x0)
+        assert np.sum((depth > 0) & (depth < smoothing)) >= 5 and np.sum(depth > smoothing) >= 5  # both branches
     asymmetry, err_K, err_f = differences(contact, x0)
     assert asymmetry <= 1e-12
     print(f"{contact_points}: tangent vs central differences {err_K:.1e}, force vs energy differences {err_f:.1e}")

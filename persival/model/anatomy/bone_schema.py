@@ -112,6 +112,9 @@ class Wall(Strict):
 
 class Contact(Strict):
     penalty: float = Field(1.0, gt=0, description="N/mm^3: contact pressure per mm of penetration (docs/theory.md, 3.5)")
+    smoothing_mm: float = Field(0.0, ge=0, description="mm of penetration over which the contact stiffness ramps up "
+                                "from 0 to the penalty (a tangent without a jump where a point enters contact; "
+                                "docs/theory.md 3.5); 0: the plain penalty")
     bone_surfaces: bool = Field(False, description="bones with a drawn shape touch the muscles that wrap them by "
                                 "their shaped surfaces (a sampled distance field), not by their capsules")
     attachment_mm: float = Field(10.0, ge=0, description="mm: a muscle's surface this near its two ends (its "

@@ -81,6 +81,7 @@ class ArmModel(ArmStateCache, ArmBody):
             mesh_angle_deg=muscle.mesh_angle_deg,
             bones=self._bones_of(muscle, mesh.points) if muscle.wraps else None,
             penalty=self.spec.contact.penalty,
+            contact_smoothing_mm=self.spec.contact.smoothing_mm,
             attachment_mm=self.spec.contact.attachment_mm,
             insertion_tie=muscle.insertion_tie,
             hinge=(self.centre, self.axis),

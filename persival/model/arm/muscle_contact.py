@@ -37,7 +37,7 @@ from scipy.spatial import cKDTree
 
 from persival.model.anatomy.bone_fields import GRID_MM, sampled_field
 from persival.model.fe import tet10
-from persival.model.fe.contact import _SUB_TRIANGLES, surface_node_weights
+from persival.model.fe.contact import _SUB_TRIANGLES, onset_penalty, surface_node_weights
 from persival.model.fe.mesh import Tet10Mesh
 
 __all__ = ["ContactBody", "MutualContact"]
@@ -105,14 +105,12 @@ ONSET_MM = 0.2  # the depth over which the contact stiffness grows from zero to 
 
 def onset_energy(D: np.ndarray) -> np.ndarray:
     """Pi / (eps w) at depth D: cubic up to ONSET_MM, then quadratic (C2 at both joins)."""
-    d0, D = ONSET_MM, np.maximum(D, 0.0)
-    return np.where(D < d0, D**3 / (6 * d0), d0**2 / 6 + 0.5 * (D**2 - d0**2) - 0.5 * d0 * (D - d0))
+    return onset_penalty(D, ONSET_MM)[0]
 
 
 def onset_slope(D: np.ndarray) -> np.ndarray:
     """d(onset_energy)/dD."""
-    d0, D = ONSET_MM, np.maximum(D, 0.0)
-    return np.where(D < d0, D**2 / (2 * d0), D - 0.5 * d0)
+    return onset_penalty(D, ONSET_MM)[1]
 
 
 class MutualContact:

@@ -109,7 +109,8 @@ class MuscleGroup:
         N = unit.contact.interpolation.tocoo()
         interpolation = sp.csr_matrix((N.data, (N.row, N.col + offset)), shape=(N.shape[0], self.mesh.n_nodes))
         return ObstacleContact(interpolation, unit.contact.weights, unit.path.bones(unit.mesh_angle_deg),
-                               unit.contact.penalty, near_ends=unit.contact.near_ends)
+                               unit.contact.penalty, near_ends=unit.contact.near_ends,
+                               smoothing_mm=unit.contact.smoothing_mm)
 
     @property
     def options(self) -> SolverOptions:

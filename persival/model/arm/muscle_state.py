@@ -53,6 +53,7 @@ class MusclePath:
     mesh_angle_deg: float
     bones: Callable[[float], Sequence] | None = None
     penalty: float = 0.0
+    contact_smoothing_mm: float = 0.0  # mm over which the contact stiffness ramps up (docs/theory.md, 3.5)
     attachment_mm: float = 0.0
     insertion_tie: str = "line"
     hinge: tuple[np.ndarray, np.ndarray] | None = None

@@ -84,7 +84,8 @@ class MuscleUnit:
             tied = np.concatenate([self._origin_face.nodes, self._insertion_face.nodes])
             ends = [mesh.points[self._origin_face.nodes].mean(axis=0), mesh.points[self._insertion_face.nodes].mean(axis=0)]
             self.contact = ObstacleContact.at_nodes(mesh, self.obstacles(self.mesh_angle_deg), path.penalty, exclude=tied,
-                                                    ends=ends, end_distance=path.attachment_mm)
+                                                    ends=ends, end_distance=path.attachment_mm,
+                                                    smoothing_mm=path.contact_smoothing_mm)
         self.solver = QuasiStaticSolver(mesh, material, [self._origin_face, self._insertion_face], options,
                                         assembler=self.assembler, extra_terms=[self.contact] if self.contact else None)
         # solved states: starts for later solves (_from_library, TableSolver.guess)

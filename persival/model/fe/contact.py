@@ -34,6 +34,20 @@ import scipy.sparse as sp
 
 from persival.model.fe.mesh import Tet10Mesh
 
+
+def onset_penalty(depth: np.ndarray, onset_mm: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The contact energy per unit penalty and area at penetration depths >= 0, its slope and its
+    curvature (docs/theory.md, 3.5): D^2/2 (the plain penalty) for ``onset_mm`` = 0, else cubic up to
+    d0 = onset_mm (D^3 / (6 d0)) and quadratic beyond (D^2/2 - d0 D/2 + d0^2/6), C2 where they meet,
+    so the stiffness grows from 0 to 1 over the first d0 mm instead of jumping at D = 0."""
+    D = np.maximum(depth, 0.0)
+    if onset_mm == 0.0:
+        return 0.5 * D**2, D, (depth > 0.0).astype(float)
+    d0, ramp = onset_mm, D < onset_mm
+    return (np.where(ramp, D**3 / (6 * d0), 0.5 * D**2 - 0.5 * d0 * D + d0**2 / 6),
+            np.where(ramp, D**2 / (2 * d0), D - 0.5 * d0), np.where(ramp, D / d0, 1.0))
+
+
 # the four 3-node sub-triangles of a 6-node face (corners 0-2, mid-sides 3 = (0,1), 4 = (1,2), 5 = (2,0))
 _SUB_TRIANGLES = np.array([[0, 3, 5], [1, 4, 3], [2, 5, 4], [3, 4, 5]])
 
@@ -86,21 +100,28 @@ class ObstacleContact:
     """
 
     def __init__(self, interpolation, weights, obstacles: Sequence, penalty: float,
-                 pose: Callable[[float], Sequence] | None = None, near_ends: np.ndarray | None = None) -> None:
+                 pose: Callable[[float], Sequence] | None = None, near_ends: np.ndarray | None = None,
+                 smoothing_mm: float = 0.0) -> None:
         self.interpolation = sp.csr_matrix(interpolation)
         self.weights = np.broadcast_to(np.asarray(weights, dtype=float), (self.interpolation.shape[0],)).copy()
-        if np.any(self.weights < 0) or not penalty > 0:
-            raise ValueError("contact weights must be non-negative and the penalty positive")
+        if np.any(self.weights < 0) or not penalty > 0 or not smoothing_mm >= 0:
+            raise ValueError("contact weights must be non-negative, the penalty positive and the smoothing >= 0")
         self.penalty = float(penalty)
+        self.smoothing_mm = float(smoothing_mm)
         self.pose = pose
         self.obstacles = tuple(obstacles if pose is None else pose(0.0))
         # points at the body's attachments: obstacles with ``spares_ends`` (a bone the muscle is
         # attached to, by its shaped surface) leave them out
         self.near_ends = None if near_ends is None else np.asarray(near_ends, dtype=bool)
 
+    def _law(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Energy psi(g) / w, pressure psi' and stiffness psi'' at penetrations g > 0: eps times
+        :func:`onset_penalty` over the smoothing (docs/theory.md, 3.5)."""
+        return tuple(self.penalty * v for v in onset_penalty(g, self.smoothing_mm))
+
     @classmethod
     def at_nodes(cls, mesh: Tet10Mesh, obstacles: Sequence, penalty: float, faces=None, exclude=(),
-                 pose=None, ends=None, end_distance: float = 0.0) -> ObstacleContact:
+                 pose=None, ends=None, end_distance: float = 0.0, smoothing_mm: float = 0.0) -> ObstacleContact:
         """Every node of the boundary faces (or of ``faces``) except ``exclude`` (e.g. tied end
         faces), with its tributary area on those faces; nodes within ``end_distance`` of one of
         ``ends`` ((k, 3) mesh-pose points) are the body's attachments (``near_ends``)."""
@@ -112,7 +133,7 @@ class ObstacleContact:
         if ends is not None and end_distance > 0:
             offsets = mesh.points[nodes][:, None, :] - np.asarray(ends, dtype=float)[None]
             near = np.min(np.linalg.norm(offsets, axis=2), axis=1) < end_distance
-        return cls(N, w, obstacles, penalty, pose, near)
+        return cls(N, w, obstacles, penalty, pose, near, smoothing_mm)
 
     @classmethod
     def on_faces(cls, mesh: Tet10Mesh, obstacles: Sequence, penalty: float, faces=None, exclude=(),
@@ -148,7 +169,7 @@ class ObstacleContact:
 
     def energy(self, x: np.ndarray) -> float:
         """Pi_c = sum_p 0.5 eps w_p <g_p>^2 (N mm; docs/theory.md, 3.5)."""
-        return sum(0.5 * self.penalty * float(self.weights[a] @ g[a] ** 2) for _, a, g, _, _ in self._pairs(x))
+        return sum(float(self.weights[a] @ self._law(g[a])[0]) for _, a, g, _, _ in self._pairs(x))
 
     def force_and_tangent(self, x: np.ndarray) -> tuple[np.ndarray, sp.csr_matrix]:
         """Residual contribution dPi_c/dx (n_dofs,) and its full symmetric Hessian (n_dofs x n_dofs):
@@ -157,9 +178,11 @@ class ObstacleContact:
         f_p = np.zeros((n_points, 3))
         rows, blocks = [], []
         for _, a, g, n, dn_dx in self._pairs(x):
-            ew, ga, na = self.penalty * self.weights[a], g[a], n[a]
-            f_p[a] -= (ew * ga)[:, None] * na
-            blocks.append(ew[:, None, None] * (na[:, :, None] * na[:, None, :] - ga[:, None, None] * dn_dx(a)))
+            w, na = self.weights[a], n[a]
+            _, pressure, stiffness = self._law(g[a])
+            f_p[a] -= (w * pressure)[:, None] * na
+            blocks.append(w[:, None, None] * (stiffness[:, None, None] * na[:, :, None] * na[:, None, :]
+                                               - pressure[:, None, None] * dn_dx(a)))
             rows.append(np.flatnonzero(a))
         active = np.concatenate(rows) if rows else np.zeros(0, dtype=np.int64)
         dofs = 3 * np.arange(len(active))[:, None] + np.arange(3)
@@ -175,7 +198,7 @@ class ObstacleContact:
         """Residual contribution dPi_c/dx (n_dofs,) alone (docs/theory.md, 3.5: f_p = -eps w g n)."""
         f_p = np.zeros((self.interpolation.shape[0], 3))
         for _, a, g, n, _ in self._pairs(x):
-            f_p[a] -= (self.penalty * self.weights[a] * g[a])[:, None] * n[a]
+            f_p[a] -= (self.weights[a] * self._law(g[a])[1])[:, None] * n[a]
         return (self.interpolation.T @ f_p).ravel()
 
     def angle_rates(self, x: np.ndarray, obstacles_at: Callable[[float], Sequence], theta_deg: float,
@@ -217,7 +240,7 @@ class ObstacleContact:
         """
         xp, c, out = self.points(x), np.asarray(centre, dtype=float).reshape(3), {}
         for obstacle, a, g, n, _ in self._pairs(x):
-            push = -(self.penalty * self.weights[a] * g[a])[:, None] * n[a]
+            push = -(self.weights[a] * self._law(g[a])[1])[:, None] * n[a]
             force, moment = out.get(obstacle.name, (np.zeros(3), np.zeros(3)))
             out[obstacle.name] = (force + push.sum(axis=0), moment + np.cross(xp[a] - c, push).sum(axis=0))
         return out
