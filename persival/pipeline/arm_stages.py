@@ -82,7 +82,7 @@ def tables(out: Path, config, console) -> dict:
 
 
 def _pushes(moments, model, console) -> dict:
-    """SPEC 3.3's "no muscle pushes" on the tables (persival.tables.push_check), said in one line."""
+    """The tables' "no muscle pushes" check (persival.tables.push_check), said in one line."""
     from persival.model.arm.model_file import load_model_file
     from persival.tables.push_check import push_check
 
@@ -92,8 +92,8 @@ def _pushes(moments, model, console) -> dict:
            f"{report['muscles'][name]['at_deg']:g} deg" for name in report["pushing"]]
     bad += [f"passive {name} flexes {report['muscles'][name]['passive_moment_max_Nmm']:.0f} N mm at "
             f"{report['muscles'][name]['passive_moment_at_deg']:g} deg" for name in report["passive_extensors_flexing"]]
-    console.print("  no muscle pushes" if not bad else f"  [yellow]{'; '.join(bad)}[/yellow] (SPEC 3.3: a muscle "
-                  f"pulls, at least {report['limit_N']:g} N, and a passive extensor never flexes)")
+    console.print("  no muscle pushes" if not bad else f"  [yellow]{'; '.join(bad)}[/yellow] (a muscle should pull, "
+                  f"at least {report['limit_N']:g} N, and a passive extensor never flex: docs/arm_model.md)")
     return report
 
 

@@ -136,4 +136,4 @@ def test_the_tables_stage_says_which_muscles_push(table, capsys):
     line = capsys.readouterr().out
     assert report["passive_extensors_flexing"] == ["triceps", "anconeus"]
     assert "brachialis pushes -20.6 N at 160 deg" in line and "passive triceps flexes 188 N mm at 20 deg" in line
-    assert "SPEC 3.3" in line and line.count("\n") == 1
+    assert "at least -2 N" in line and line.count("\n") == 1
