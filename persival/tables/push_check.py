@@ -19,7 +19,7 @@ __all__ = ["PUSH_LIMIT_N", "push_check"]
 PUSH_LIMIT_N = -2.0
 
 
-def push_check(table: MomentTable, extensors: tuple[str, ...] = ("triceps", "anconeus")) -> dict:
+def push_check(table: MomentTable, extensors: tuple[str, ...]) -> dict:
     """Per muscle the least tension in the table (N, with its angle and level), for the
     ``extensors`` the largest passive moment (N mm, flexion positive, with its angle); and the
     muscles that push (least tension below -2 N) or, passive, flex the elbow (moment above 0)."""

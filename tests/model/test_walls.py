@@ -146,6 +146,12 @@ def test_a_wall_that_fades_with_the_elbow_holds_then_lets_go_smoothly(tmp_path):
     (tmp_path / "arm.toml").write_text(edited)
     with pytest.raises(ModelFileError, match="anterior_septum.*fades_deg must rise"):
         load_model_file(tmp_path / "arm.toml")
+    fascia = 'kind = "septum"\npoint = [0.0, -40.0, 0.0]'
+    sleeve = text.replace(fascia, 'kind = "sleeve"\ngives_mm = 2.0\npoint = [0.0, -40.0, 0.0]', 1)
+    assert sleeve != text
+    (tmp_path / "arm.toml").write_text(sleeve)
+    with pytest.raises(ModelFileError, match="only a septum gives way"):
+        load_model_file(tmp_path / "arm.toml")
 
 
 def test_a_septum_that_gives_way_moves_away_from_the_muscle_it_holds():

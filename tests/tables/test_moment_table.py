@@ -113,7 +113,7 @@ def test_the_push_check_finds_the_built_in_arms_pushing_muscles_and_passes_a_pul
     extensors' moments turned to extension the check passes."""
     from persival.tables.push_check import push_check
 
-    report = push_check(table)
+    report = push_check(table, ("triceps", "anconeus"))
     assert report["pushing"] == list(MUSCLES) and report["passive_extensors_flexing"] == ["triceps", "anconeus"]
     brachialis, triceps = report["muscles"]["brachialis"], report["muscles"]["triceps"]
     assert brachialis["least_tension_N"] == pytest.approx(np.nanmin(table.tension[1])) and brachialis["least_tension_N"] < -2.0
@@ -123,7 +123,7 @@ def test_the_push_check_finds_the_built_in_arms_pushing_muscles_and_passes_a_pul
     moments = table.moments.copy()
     moments[3:, :, 0] = -np.abs(moments[3:, :, 0])
     pulling = replace(table, tension=np.abs(table.tension), moments=moments)
-    clean = push_check(pulling)
+    clean = push_check(pulling, ("triceps", "anconeus"))
     assert clean["pushing"] == [] and clean["passive_extensors_flexing"] == []
 
 

@@ -95,6 +95,8 @@ class Wall(Strict):
 
     @model_validator(mode="after")
     def _complete(self):
+        if self.gives_mm and self.kind != "septum":
+            raise ValueError(f"wall {self.name!r}: only a septum gives way (gives_mm), not a {self.kind}")
         need = {"septum": ("point", "normal", "band"), "sleeve": ("start", "end", "radius")}[self.kind]
         missing = [k for k in need if getattr(self, k) is None]
         if missing:

@@ -73,7 +73,7 @@ class ArmModel(ArmStateCache, ArmBody):
         )
         mf = self.material
         material = MaterialField(mf.fibre[cells], mf.muscle_fraction[cells], mf.bulk_modulus[cells],
-                                 mf.fibre_prestretch[cells], mf.parameters, mf.matrix_stretch()[cells])
+                                 mf.fibre_prestretch[cells], mf.parameters, mf.matrix_prestretch[cells])
         path = MusclePath(
             origin=np.asarray(muscle.origin, dtype=float),
             insertion=lambda theta, m=muscle: self.body_end(m, theta),

@@ -84,7 +84,7 @@ class MuscleGroup:
         fields = ("fibre", "muscle_fraction", "bulk_modulus", "fibre_prestretch")
         self.material = MaterialField(*(np.concatenate([getattr(u.material, k) for u in units]) for k in fields),
                                       units[0].material.parameters,
-                                      np.concatenate([u.material.matrix_stretch() for u in units]))
+                                      np.concatenate([u.material.matrix_prestretch for u in units]))
         self.faces = []
         surfaces = []
         for unit, offset in zip(units, self.offsets):

@@ -189,7 +189,7 @@ class MuscleUnit:
         while targets:
             share = targets[0]
             self.solver.material = replace(full, fibre_prestretch=1.0 + share * (full.fibre_prestretch - 1.0),
-                                           matrix_prestretch=1.0 + share * (full.matrix_stretch() - 1.0))
+                                           matrix_prestretch=1.0 + share * (full.matrix_prestretch - 1.0))
             report = None if progress is None else (lambda t, a=before, b=share: progress(a + t * (b - a)))
             try:
                 u = self.solver.solve(0.0, initial_displacement=u, progress=report).displacement

@@ -43,11 +43,9 @@ class MaterialField:
     # the muscle matrix's stress-free stretch along the fibre (docs/theory.md, 1.7); None: 1 everywhere
     matrix_prestretch: np.ndarray | None = None
 
-    def matrix_stretch(self) -> np.ndarray:
-        """The matrix prestretch at every quadrature point (ones when there is none)."""
+    def __post_init__(self) -> None:
         if self.matrix_prestretch is None:
-            return np.ones_like(self.fibre_prestretch)
-        return self.matrix_prestretch
+            self.matrix_prestretch = np.ones_like(self.fibre_prestretch)
 
     @classmethod
     def from_cells(
@@ -164,7 +162,7 @@ class Tet10Assembler:
             Ke = np.empty((self.mesh.n_cells, 0, 0))
         bad = _element_kernel(
             ue, self.dN, self.weights, material.fibre, act, material.muscle_fraction, material.bulk_modulus,
-            material.fibre_prestretch, material.matrix_stretch(), material.parameters.packed(), with_tangent, fe, Ke,
+            material.fibre_prestretch, material.matrix_prestretch, material.parameters.packed(), with_tangent, fe, Ke,
         )
         if bad:
             raise InvertedElementError(f"det F <= 0 in {bad} element(s)")
