@@ -38,6 +38,12 @@ def pytest_configure(config):
             shutil.copytree(SEED_CACHE, root, dirs_exist_ok=True)
         os.environ["PERSIVAL_CACHE"] = root
         os.environ["PERSIVAL_TEST_CACHE_SET"] = "1"
+    # The FE tests' small real input is the spindle arm on its coarse mesh (tests/data holds its
+    # tables and rest states): the anatomical built-in arm costs several times more Newton
+    # iterations per solve on its walls (docs/arm_model.md), which the 10-minute suite cannot carry.
+    # Commands without --model take it through the variable (persival.model.arm.defaults), worker
+    # processes included; the tests of the built-in arm's file name it (builtin_model_path).
+    os.environ.setdefault("PERSIVAL_MODEL", "spindle_arm")
 
 
 def _build_small_run(root: Path) -> Path:

@@ -214,9 +214,9 @@ def workdir(tmp_path_factory):
     (root / "afile").write_text("not a folder\n")
     (root / "folder").mkdir()
     (root / "foreign.toml").write_text('name = "a table that is no arm"\n[bones]\nradius = 3\n')
-    from persival.model.arm.defaults import default_model_path
+    from persival.model.arm.defaults import builtin_model_path
 
-    atlas = (default_model_path().parent / "variants" / "atlas_arm.toml").read_text()
+    atlas = (builtin_model_path().parent / "variants" / "atlas_arm.toml").read_text()
     (root / "overlap.toml").write_text(atlas.replace("{ z = 81.7, centre = [-2.0, 21.0]", "{ z = 81.7, centre = [-2.0, 32.0]"))
     (root / "bad.csv").write_text("0.1,0.2,0.3,0.4,1.5\n")
     (root / "nan.csv").write_text("0.1,0.2,nan,0.4,0.5\n")

@@ -51,7 +51,7 @@ def wheel(tmp_path_factory) -> Path:
 
 def test_the_wheel_carries_the_models_and_the_viewer_not_the_sources(wheel):
     names = set(zipfile.ZipFile(wheel).namelist())
-    for needed in ("persival/model/arm/default_arm.toml", "persival/model/arm/variants/atlas_walls.toml",
+    for needed in ("persival/model/arm/default_arm.toml", "persival/model/arm/variants/spindle_arm.toml",
                    "persival/deploy/web/dist/index.html", "persival/deploy/web/dist/app.js",
                    "persival/cli/app.py", "persival/model/fe/solver.py"):
         assert needed in names, needed
@@ -85,9 +85,9 @@ def test_installed_into_a_fresh_venv_it_runs_from_an_empty_folder(wheel, tmp_pat
     assert where[0].startswith(str(venv)), f"persival imported from {where[0]}, not the wheel"
     assert Path(where[1]).is_file()  # the viewer `persival serve` serves
     assert "end to end" in persival("--help").lower()
-    assert "atlas_walls" in persival("model", "list")
+    assert "spindle_arm" in persival("model", "list")
     persival("model", "init", "--out", "my_arm.toml")
-    assert (work / "my_arm.toml").read_text().startswith("# PerSival built-in upper-limb model")
+    assert (work / "my_arm.toml").read_text().startswith("# PerSival's built-in arm")
     persival("campaign", "run", "--store", "small.zarr", "--simulator", "analytic", "--level", "1",
              "--scheduler", "inline", "--no-progress")
     status = persival("campaign", "status", "--store", "small.zarr")

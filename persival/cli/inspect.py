@@ -9,7 +9,7 @@ import typer
 
 from persival.cli.errors import check_output_dir, check_output_file, user_errors
 from persival.cli.values import parse_numbers
-from persival.model.arm.defaults import profiles_help
+from persival.model.arm.defaults import MODEL_HELP, profiles_help
 
 
 def register(app: typer.Typer) -> None:
@@ -55,7 +55,7 @@ def sections(
 
 
 def curves(
-    model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+    model: Path | None = typer.Option(None, "--model", help=MODEL_HELP),
     profile: str = typer.Option("quick", "--profile", help=profiles_help()),
     out: Path = typer.Option(Path("results/curves"), "--out", help="Output directory (curves.json, curves.png)."),
 ) -> None:

@@ -10,7 +10,7 @@ import typer
 
 from persival.cli.errors import check_output_dir, check_output_file, user_errors
 from persival.cli.help import FullHelpGroup
-from persival.model.arm.defaults import profiles_help
+from persival.model.arm.defaults import MODEL_HELP, profiles_help
 
 
 def register(app: typer.Typer) -> None:
@@ -83,7 +83,7 @@ def init(
 
 
 def mesh(
-    model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+    model: Path | None = typer.Option(None, "--model", help=MODEL_HELP),
     muscles: str | None = typer.Option(None, "--muscles", help="Comma-separated muscles (default: those with their own "
                                        "surface, or all five when none has one)."),
     profile: str = typer.Option("quick", "--profile", help=profiles_help()),

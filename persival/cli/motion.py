@@ -30,7 +30,8 @@ def motion(
     table: Path = typer.Option(None, "--table", help="Moment table (persival moments --out)."),
     out: Path = typer.Option(None, "--out", help="Output folder: motion_model.json/.npz, motion_model.png, "
                              "activation_motion.onnx."),
-    model: Path = typer.Option(None, "--model", help="Model file the table must belong to; default: the built-in arm."),
+    model: Path = typer.Option(None, "--model", help="Model file the table must belong to; default: $PERSIVAL_MODEL, "
+                             "else the built-in arm."),
     angles: str = typer.Option("30,60,90,120", "--angles", help="Elbow angles (deg) of the printed table."),
     loads: str = typer.Option("0,1,2,5", "--loads", help="Hand loads (kg) of the printed table."),
 ) -> None:

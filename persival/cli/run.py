@@ -17,7 +17,7 @@ def register(app: typer.Typer) -> None:
     def run(
         out: Path = typer.Option(Path("results"), "--out", help="Results directory (resumed stage by stage)."),
         model: Path | None = typer.Option(None, "--model", help="Model file (TOML; `persival model init` writes one to "
-                                          "edit); default: the built-in arm."),
+                                          "edit) or a packaged model's name; default: $PERSIVAL_MODEL, else the built-in arm."),
         profile: str = typer.Option(
             "quick", "--profile", help=profiles_help()),
         simulator: str = typer.Option(

@@ -9,6 +9,7 @@ import typer
 from persival.cli.errors import check_output_dir, fail, user_errors
 from persival.cli.help import FullHelpGroup
 from persival.cli.values import parse_numbers
+from persival.model.arm.defaults import MODEL_HELP
 
 
 def register(app: typer.Typer) -> None:
@@ -52,7 +53,7 @@ def fit_structured_command(
     store: Path = typer.Option(..., "--store", help="Campaign store of the FE arm: the surfaces to answer."),
     out: Path = typer.Option(Path("results/structured"), "--out", help="Output directory."),
     profile: str = typer.Option("quick", "--profile", help="Mesh profile of the arm (its response tables)."),
-    model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+    model: Path | None = typer.Option(None, "--model", help=MODEL_HELP),
     tables: Path | None = typer.Option(None, "--tables", help="Response-table folder (default: the model's cache)."),
     tolerance: float | None = typer.Option(None, "--tolerance", min=1e-6, help="POD truncation, mm: every tabulated "
                                            "surface kept within it [default: 0.2]."),

@@ -14,7 +14,7 @@ import typer
 
 from persival.cli.errors import check_output_dir, check_output_file, user_errors
 from persival.cli.values import parse_activations, parse_grid
-from persival.model.arm.defaults import profiles_help
+from persival.model.arm.defaults import MODEL_HELP, profiles_help
 from persival.tables.response_table import DEFAULT_LEVELS
 from persival.vocabulary import MUSCLES, N_ACTIVATIONS
 
@@ -31,7 +31,7 @@ def register(app: typer.Typer) -> None:
 
 def tables(
     profile: str = typer.Option("quick", "--profile", help=profiles_help()),
-    model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+    model: Path | None = typer.Option(None, "--model", help=MODEL_HELP),
     out: Path | None = typer.Option(None, "--out", help="Table folder (default: the model's state cache)."),
     moments_out: Path | None = typer.Option(None, "--moments-out",
                                             help="Also write the moments as a moment table (.npz, for `persival motion`)."),
@@ -85,7 +85,7 @@ def tables(
 
 def simulate(
     activations: str = typer.Option(..., "--activations", "-a", help=ACTIVATIONS_HELP),
-    model: Path | None = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+    model: Path | None = typer.Option(None, "--model", help=MODEL_HELP),
     profile: str = typer.Option("quick", "--profile", help=profiles_help()),
     method: str = typer.Option("auto", "--method",
                                help="tables (from `persival tables`), direct (coupled continuation) or auto "
@@ -197,7 +197,7 @@ def _print_table(console, table, seconds: float) -> None:
 def moments(
     out: Path = typer.Option(..., "--out", help="Table file (.npz); an unfinished one of the same grid is resumed."),
     profile: str = typer.Option("quick", "--profile", help="Mesh profile (coarse, quick, paper)."),
-    model: Path = typer.Option(None, "--model", help="Model file (TOML); default: the built-in arm."),
+    model: Path = typer.Option(None, "--model", help=MODEL_HELP),
     angles: str = typer.Option("0:160:10", "--angles", help="Elbow angles, deg: START:STOP:STEP or a list."),
     levels: str = typer.Option("0,0.25,0.5,0.75,1", "--levels", help="Activation levels from 0 to 1."),
 ) -> None:

@@ -82,16 +82,29 @@ def tables(out: Path, config, console) -> dict:
 
 
 def _pushes(moments, model, console) -> dict:
-    """The tables' "no muscle pushes" check (persival.tables.push_check), said in one line."""
+    """The tables' "no muscle pushes" check (persival.tables.push_check), said in one line: over
+    the whole table, and what of it lies within the joint's limits."""
     from persival.model.arm.model_file import load_model_file
     from persival.tables.push_check import push_check
 
     spec, _ = load_model_file(model)
-    report = push_check(moments, tuple(m.name for m in spec.muscles if m.action == "extensor"))
-    bad = [f"{name} pushes {report['muscles'][name]['least_tension_N']:.1f} N at "
-           f"{report['muscles'][name]['at_deg']:g} deg" for name in report["pushing"]]
-    bad += [f"passive {name} flexes {report['muscles'][name]['passive_moment_max_Nmm']:.0f} N mm at "
-            f"{report['muscles'][name]['passive_moment_at_deg']:g} deg" for name in report["passive_extensors_flexing"]]
+    limits = tuple(spec.joint.limits_deg)
+    report = push_check(moments, tuple(m.name for m in spec.muscles if m.action == "extensor"), limits)
+    within = f"{limits[0]:g}-{limits[1]:g} deg"
+
+    def said(name: str, key: str, value: str, angle: str) -> str:
+        whole, inside = report["muscles"][name], report["muscles"][name]["in_joint_range"]
+        text = f"{value.format(whole[key])} at {whole[angle]:g} deg"
+        if inside.get(angle) == whole[angle]:
+            return text
+        flagged = name in report["pushing_in_joint_range" if key == "least_tension_N"
+                                else "passive_extensors_flexing_in_joint_range"]
+        return text + (f" ({value.format(inside[key])} at {inside[angle]:g} deg within {within})" if flagged
+                       else f" (not within {within})")
+
+    bad = [f"{name} pushes " + said(name, "least_tension_N", "{:.1f} N", "at_deg") for name in report["pushing"]]
+    bad += [f"passive {name} flexes " + said(name, "passive_moment_max_Nmm", "{:.0f} N mm", "passive_moment_at_deg")
+            for name in report["passive_extensors_flexing"]]
     console.print("  no muscle pushes" if not bad else f"  [yellow]{'; '.join(bad)}[/yellow] (a muscle should pull, "
                   f"at least {report['limit_N']:g} N, and a passive extensor never flex: docs/arm_model.md)")
     return report

@@ -216,15 +216,14 @@ def test_outlines_are_the_muscles_cross_sections_and_overlaps_are_refused_by_nam
 
 
 def test_a_layout_that_leaves_the_skin_is_refused_naming_the_muscle_and_level(tmp_path):
-    """The atlas-with-walls file draws the skin: its outlines lie inside it; the skin is the
+    """The built-in arm's file draws the skin: its outlines lie inside it; the skin is the
     model file's ellipses, interpolated between their heights; the same file with a mid-arm skin
     10 mm narrower front to back is refused before anything is meshed, naming the biceps."""
-    from pathlib import Path
-
     from persival.model.arm.cross_sections import OutlineOverlapError, outline_overlaps, skin_at
+    from persival.model.arm.defaults import builtin_model_path
     from persival.model.arm.kinematics import ArmKinematics
 
-    source = Path("persival/model/arm/variants/atlas_walls.toml")
+    source = builtin_model_path()
     atlas = ArmKinematics(source)  # checked on loading: nothing overlaps or leaves the skin
     assert not outline_overlaps(atlas)
     ring = skin_at(atlas.spec, 145.0)

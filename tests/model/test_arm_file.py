@@ -9,7 +9,7 @@ from typer.testing import CliRunner
 from persival.cli import app
 from persival.model.anatomy.schema_base import ModelFileError
 from persival.model.arm.arm_model import ArmModel, muscle_profile
-from persival.model.arm.defaults import default_model_path, packaged_models, resolve_model_path
+from persival.model.arm.defaults import builtin_model_path, default_model_path, packaged_models, resolve_model_path
 from persival.model.arm.model_file import load_model_file
 from persival.model.fe.geometry import swept_solid_mesh
 from persival.vocabulary import MUSCLES
@@ -131,14 +131,34 @@ def test_simulate_command_refuses_bad_input_before_meshing(tmp_path):
 
 def test_packaged_models_load_by_name(tmp_path, monkeypatch):
     """--model takes a packaged model's name; a file of that name in the working folder wins."""
-    walls = default_model_path().parent / "variants" / "atlas_walls.toml"
-    assert packaged_models()["atlas_walls"] == walls and packaged_models()["default"] == default_model_path()
-    assert load_model_file("atlas_walls")[1] == load_model_file(walls)[1]
-    assert load_model_file("default")[1] == load_model_file(None)[1]
+    spindle = builtin_model_path().parent / "variants" / "spindle_arm.toml"
+    assert packaged_models()["spindle_arm"] == spindle and packaged_models()["default"] == builtin_model_path()
+    assert load_model_file("spindle_arm")[1] == load_model_file(spindle)[1]
+    assert load_model_file("default")[1] == load_model_file(builtin_model_path())[1]
     monkeypatch.chdir(tmp_path)
-    (tmp_path / "atlas_walls").write_text(default_model_path().read_text())
-    assert resolve_model_path("atlas_walls") == Path("atlas_walls")
-    assert load_model_file("atlas_walls")[1] == load_model_file(None)[1]
+    (tmp_path / "spindle_arm").write_text(builtin_model_path().read_text())
+    assert resolve_model_path("spindle_arm") == Path("spindle_arm")
+    assert load_model_file("spindle_arm")[1] == load_model_file("default")[1]
+
+
+def test_the_model_variable_picks_the_model_of_commands_without_model(tmp_path, monkeypatch):
+    """$PERSIVAL_MODEL (a packaged name or a file) is what no --model means; unset, the built-in arm;
+    naming nothing is refused in one line that names the variable."""
+    monkeypatch.delenv("PERSIVAL_MODEL", raising=False)
+    assert default_model_path() == builtin_model_path()
+    assert [w.name for w in load_model_file(None)[0].walls] == ["anterior_septum", "posterior_fascia"]  # anatomical
+    monkeypatch.setenv("PERSIVAL_MODEL", "spindle_arm")
+    assert load_model_file(None)[1] == load_model_file("spindle_arm")[1]
+    own = tmp_path / "own.toml"
+    own.write_text(builtin_model_path().read_text())
+    monkeypatch.setenv("PERSIVAL_MODEL", str(own))
+    assert default_model_path() == own
+    monkeypatch.setenv("PERSIVAL_MODEL", "nosuch_arm")
+    with pytest.raises(ModelFileError, match="PERSIVAL_MODEL=nosuch_arm: no such model file"):
+        load_model_file(None)
+    result = CliRunner().invoke(app, ["simulate", "-a", "0,0,0,0,0", "--out", str(tmp_path / "o")])
+    assert result.exit_code != 0 and "PERSIVAL_MODEL=nosuch_arm" in result.output
+    assert not (tmp_path / "o").exists()
 
 
 def test_model_list_and_init_from_a_variant(tmp_path):
@@ -147,11 +167,11 @@ def test_model_list_and_init_from_a_variant(tmp_path):
     assert listing.exit_code == 0, listing.output
     for name in packaged_models():
         assert name in listing.output
-    assert "kept apart by a fascial wall" in listing.output  # the variant's own comment says what it is
-    out = tmp_path / "walls.toml"
-    result = runner.invoke(app, ["model", "init", "--from", "atlas_walls", "--out", str(out)])
+    assert "five muscles lofted through atlas outlines" in listing.output  # the file's own comment says what it is
+    out = tmp_path / "spindle.toml"
+    result = runner.invoke(app, ["model", "init", "--from", "spindle_arm", "--out", str(out)])
     assert result.exit_code == 0, result.output
-    assert out.read_text() == packaged_models()["atlas_walls"].read_text()
+    assert out.read_text() == packaged_models()["spindle_arm"].read_text()
     refused = runner.invoke(app, ["model", "init", "--from", "nosuch", "--out", str(tmp_path / "x.toml")])
     assert refused.exit_code != 0 and "not a packaged model" in refused.output
     assert not (tmp_path / "x.toml").exists()
@@ -159,9 +179,9 @@ def test_model_list_and_init_from_a_variant(tmp_path):
 
 def test_biceps_on_humerus_variant_loads():
     """The shipped variant: the default but for the biceps (humerus contact, forearm tie, meshed at 120 deg)."""
-    variant = default_model_path().parent / "variants" / "biceps_on_humerus.toml"
+    variant = builtin_model_path().parent / "variants" / "biceps_on_humerus.toml"
     spec, _ = load_model_file(variant)
-    default, _ = load_model_file(None)
+    default, _ = load_model_file("spindle_arm")
     biceps = {m.name: m for m in spec.ordered_muscles()}["biceps"]
     assert biceps.wraps == ["humerus"] and biceps.insertion_tie == "forearm" and biceps.mesh_angle_deg == 120.0
     assert [m for m in spec.ordered_muscles() if m.name != "biceps"] == [m for m in default.ordered_muscles()

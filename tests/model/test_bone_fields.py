@@ -108,14 +108,14 @@ def test_a_muscles_attachment_does_not_touch_the_bone_it_is_attached_to(sphere_f
 
 
 def test_a_forearm_bone_turns_with_the_elbow_by_its_shaped_surface():
-    """The atlas arm's radius as a contact obstacle (bone_obstacles with its field): at 90 deg its
+    """The built-in arm's radius as a contact obstacle (bone_obstacles with its field): at 90 deg its
     shaped surface, turned about the hinge, is the field's zero level."""
     from persival.model.anatomy.bone_shapes import bone_shapes
     from persival.model.anatomy.obstacles import bone_obstacles
-    from persival.model.arm.defaults import default_model_path
+    from persival.model.arm.defaults import builtin_model_path
     from persival.model.arm.model_file import load_model_file
 
-    spec, _ = load_model_file(default_model_path().parent / "variants" / "atlas_walls.toml")
+    spec, _ = load_model_file(builtin_model_path())
     points, triangles = bone_shapes(spec)["radius"]
     radius = spec.bone("radius")
     field = sampled_field(points, triangles, "radius")
@@ -136,13 +136,13 @@ def test_a_model_with_bone_surfaces_gives_its_muscles_the_shaped_bones(tmp_path)
     from persival.model.anatomy.obstacles import Capsule
     from persival.model.arm.arm_model import ArmModel
     from persival.model.arm.body import ArmBody
-    from persival.model.arm.defaults import default_model_path
+    from persival.model.arm.defaults import builtin_model_path
 
-    text = (default_model_path().parent / "variants" / "atlas_walls.toml").read_text()
+    text = builtin_model_path().read_text()
     shaped = tmp_path / "shaped.toml"
     shaped.write_text(text.replace("[joint]", "[contact]\nbone_surfaces = true\n\n[joint]", 1))
     kinds = {}
-    for path in (default_model_path().parent / "variants" / "atlas_walls.toml", shaped):
+    for path in (builtin_model_path(), shaped):
         frame = ArmBody.frame(path, "coarse")
         muscle = frame.spec.muscle("brachialis")
         obstacles = ArmModel._bones_of(frame, muscle, frame.centre_line(muscle))(30.0)
@@ -151,4 +151,4 @@ def test_a_model_with_bone_surfaces_gives_its_muscles_the_shaped_bones(tmp_path)
             (humerus,) = [o for o in obstacles if isinstance(o, DistanceField)]
             assert humerus.name == "humerus" and humerus.spares_ends
             assert frame.spec.contact.attachment_mm == 10.0
-    assert kinds == {"atlas_walls.toml": {Capsule.__name__, "Septum"}, "shaped.toml": {"DistanceField", "Septum"}}
+    assert kinds == {"default_arm.toml": {Capsule.__name__, "Septum"}, "shaped.toml": {"DistanceField", "Septum"}}

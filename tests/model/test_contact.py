@@ -380,13 +380,13 @@ def test_variant_biceps_lies_on_the_humerus_at_150_deg(capsys):
     bone within the penalty's 0.5 mm, within SPEC 3.3's |J - 1| < 1 %, and still flexes (the
     default's straight biceps passes 9.4 mm into the bone there: docs/design/arm_model_record.md)."""
     from persival.model.arm.arm_model import ArmModel
-    from persival.model.arm.defaults import default_model_path
+    from persival.model.arm.defaults import builtin_model_path
 
     def deepest_in_humerus(points):
         inside = (points[:, 2] > 12.0) & (points[:, 2] < 300.0)
         return 10.0 - np.hypot(points[inside, 0], points[inside, 1]).min()
 
-    variant = ArmModel(default_model_path().parent / "variants" / "biceps_on_humerus.toml", profile="coarse")
+    variant = ArmModel(builtin_model_path().parent / "variants" / "biceps_on_humerus.toml", profile="coarse")
     unit = variant.units["biceps"]
     state = unit.solve(150.0, 1.0)
     depth = deepest_in_humerus(unit.positions(state))

@@ -75,10 +75,10 @@ def test_two_blocks_pressed_into_each_other_part_at_the_penalty_depth(push, seca
 
 def touching_arm(tmp_path):
     """A copy of the shipped variant whose biceps and brachialis touch each other."""
-    from persival.model.arm.defaults import default_model_path
+    from persival.model.arm.defaults import builtin_model_path
 
     path = tmp_path / "touching.toml"
-    path.write_text((default_model_path().parent / "variants" / "atlas_touching.toml").read_text())
+    path.write_text((builtin_model_path().parent / "variants" / "atlas_touching.toml").read_text())
     return path
 
 

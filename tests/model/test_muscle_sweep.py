@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from persival.model.anatomy.schema_base import ModelFileError
-from persival.model.arm.defaults import default_model_path
+from persival.model.arm.defaults import builtin_model_path
 from persival.model.arm.kinematics import ArmKinematics
 from persival.model.arm.model_file import load_model_file
 
-ATLAS = default_model_path().parent / "variants" / "atlas_arm.toml"
+ATLAS = builtin_model_path().parent / "variants" / "atlas_arm.toml"
 
 
 @pytest.fixture(scope="module")

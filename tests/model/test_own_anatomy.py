@@ -13,7 +13,7 @@ from persival.cli import app
 from persival.model.anatomy.surface_mesh import volume_mesh
 from persival.model.anatomy.surface_muscle import surface_muscle
 from persival.model.arm.body import ArmBody
-from persival.model.arm.defaults import default_model_path
+from persival.model.arm.defaults import builtin_model_path
 from persival.model.arm.model_file import load_model_file
 
 COARSE_BICEPS = 16.0  # mm, the coarse profile's biceps element size
@@ -23,8 +23,8 @@ def test_model_init_writes_the_built_in_model(tmp_path):
     out = tmp_path / "sub" / "my_arm.toml"
     result = CliRunner().invoke(app, ["model", "init", "--out", str(out)])
     assert result.exit_code == 0, result.output
-    assert out.read_text() == default_model_path().read_text()
-    assert load_model_file(out)[1] == load_model_file()[1]  # the same model, the same provenance
+    assert out.read_text() == builtin_model_path().read_text()
+    assert load_model_file(out)[1] == load_model_file("default")[1]  # the same model, the same provenance
 
 
 # -- muscles from surfaces -------------------------------------------------------------------------

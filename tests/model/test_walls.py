@@ -52,15 +52,15 @@ def test_septum_acts_only_in_its_band_and_keeps_each_side():
     assert kept_deep.project(deep)[0].max() <= 0.0 and kept_deep.project(superficial)[0].min() > 0.0
 
 
-def test_the_atlas_walls_variant_keeps_biceps_and_brachialis_on_either_side_of_its_septum():
-    """persival/model/arm/variants/atlas_walls.toml: the septum reaches both muscles, turned so that
+def test_the_built_in_arm_keeps_biceps_and_brachialis_on_either_side_of_its_septum():
+    """persival/model/arm/default_arm.toml: the septum reaches both muscles, turned so that
     each keeps to the side it is laid out on (the sides from its centre line's stations here, from
     its mesh nodes in the arm), with the whole centre line on that side."""
     from persival.model.arm.arm_model import ArmModel
     from persival.model.arm.body import ArmBody
-    from persival.model.arm.defaults import default_model_path
+    from persival.model.arm.defaults import builtin_model_path
 
-    frame = ArmBody.frame(default_model_path().parent / "variants" / "atlas_walls.toml", "coarse")  # no mesh
+    frame = ArmBody.frame(builtin_model_path(), "coarse")  # no mesh
     normals = {}
     for name in ("biceps", "brachialis"):
         muscle = frame.spec.muscle(name)
@@ -105,10 +105,10 @@ def test_a_wall_that_turns_with_the_elbow_turns_about_its_pivot_smoothly():
 
 def test_a_turning_wall_without_a_pivot_is_refused(tmp_path):
     from persival.model.anatomy.schema_base import ModelFileError
-    from persival.model.arm.defaults import default_model_path
+    from persival.model.arm.defaults import builtin_model_path
     from persival.model.arm.model_file import load_model_file
 
-    text = (default_model_path().parent / "variants" / "atlas_walls.toml").read_text()
+    text = builtin_model_path().read_text()
     edited = text.replace("band = [45.0, 140.0]\n", "band = [45.0, 140.0]\nturns = -0.06\n", 1)
     assert edited != text
     (tmp_path / "arm.toml").write_text(edited)
@@ -121,7 +121,7 @@ def test_a_wall_that_fades_with_the_elbow_holds_then_lets_go_smoothly(tmp_path):
     between (slope 0 at both ends); a falling range is refused with the wall named."""
     from persival.model.anatomy.schema_base import ModelFileError
     from persival.model.anatomy.walls import fade_share
-    from persival.model.arm.defaults import default_model_path
+    from persival.model.arm.defaults import builtin_model_path
     from persival.model.arm.model_file import load_model_file
 
     class Wall:
@@ -141,7 +141,7 @@ def test_a_wall_that_fades_with_the_elbow_holds_then_lets_go_smoothly(tmp_path):
     moved = faded.transformed(np.eye(3), np.zeros(3))  # a muscle's frame: the share goes along
     assert moved.project(inside)[0][0] == pytest.approx(2.5)
 
-    text = (default_model_path().parent / "variants" / "atlas_walls.toml").read_text()
+    text = builtin_model_path().read_text()
     edited = text.replace("band = [45.0, 140.0]\n", "band = [45.0, 140.0]\nfades_deg = [140.0, 120.0]\n", 1)
     (tmp_path / "arm.toml").write_text(edited)
     with pytest.raises(ModelFileError, match="anterior_septum.*fades_deg must rise"):

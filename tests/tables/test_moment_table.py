@@ -127,6 +127,24 @@ def test_the_push_check_finds_the_built_in_arms_pushing_muscles_and_passes_a_pul
     assert clean["pushing"] == [] and clean["passive_extensors_flexing"] == []
 
 
+def test_the_push_check_says_what_lies_within_the_joints_limits(table):
+    """With the joint's limits the check also reads the angles inside them alone: on the coarse
+    built-in arm held to 0-100 deg the brachioradialis' push (-3.8 N at 160 deg) is gone, the
+    brachialis' least tension is its value at 100 deg, and the extensors' 0-deg pushes stay."""
+    from persival.tables.push_check import push_check
+
+    report = push_check(table, ("triceps", "anconeus"), (0.0, 100.0))
+    inside = table.angles_deg <= 100.0
+    brachialis = report["muscles"]["brachialis"]["in_joint_range"]
+    assert brachialis["least_tension_N"] == pytest.approx(np.nanmin(table.tension[1][inside]))
+    assert brachialis["at_deg"] == 100.0 and report["muscles"]["brachialis"]["at_deg"] == 160.0
+    assert "brachioradialis" in report["pushing"] and "brachioradialis" not in report["pushing_in_joint_range"]
+    assert report["pushing_in_joint_range"] == ["biceps", "brachialis", "triceps", "anconeus"]
+    assert report["muscles"]["triceps"]["in_joint_range"] == {k: v for k, v in report["muscles"]["triceps"].items()
+                                                              if k != "in_joint_range"}
+    assert report["joint_limits_deg"] == [0.0, 100.0] and "pushing_in_joint_range" not in push_check(table, ())
+
+
 def test_the_tables_stage_says_which_muscles_push(table, capsys):
     """The run's tables stage reports the check in one line, with the extensors from the model file."""
     from persival.pipeline.arm_stages import _pushes

@@ -64,7 +64,10 @@ def load_model_file(path: str | Path | None = None) -> tuple[ArmModelFile, str]:
 
     Returns the model and the sha256 of its text (provenance).
     """
-    path = resolve_model_path(path)
+    try:
+        path = resolve_model_path(path)
+    except FileNotFoundError as exc:  # $PERSIVAL_MODEL names nothing
+        raise ModelFileError(str(exc)) from None
     try:
         text = path.read_text()
     except OSError as exc:
