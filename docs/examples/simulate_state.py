@@ -1,9 +1,10 @@
 """Simulate one FE state of the arm: biceps half active, every other muscle at rest.
 
-The built-in arm on the coarse mesh, solved by the exact path of docs/theory.md, 4.3: the joint
-equilibrium on the per-muscle response tables, then every muscle re-solved by Newton there. The
-coarse tables ship with the tests (tests/data/response_table_coarse), so nothing is built first;
-`persival tables --profile quick` builds the tables of the default mesh (minutes).
+The spindle arm (the packaged variant the tests use) on the coarse mesh, solved by the exact path
+of docs/theory.md, 4.3: the joint equilibrium on the per-muscle response tables, then every muscle
+re-solved by Newton there. Its coarse tables ship with the tests (tests/data/response_table_coarse),
+so nothing is built first; `persival tables --profile quick` builds the tables of the built-in arm
+on the default mesh (long: 40 min on 2 cores).
 
     python docs/examples/simulate_state.py [OUT]
 
@@ -29,7 +30,7 @@ from persival.model.arm.state_cache import mesh_fingerprint  # noqa: E402
 from persival.tables.response_table import ResponseTable  # noqa: E402
 from persival.tables.table_solve import TableSolver  # noqa: E402
 
-arm = ArmModel(profile="coarse")  # meshes once (gmsh), then from the cache
+arm = ArmModel("spindle_arm", profile="coarse")  # meshes once (gmsh), then from the cache
 table = ResponseTable.open(REPO / "tests" / "data" / "response_table_coarse", arm.model_hash, "coarse",
                            mesh_fingerprint(arm.mesh))
 state = TableSolver(arm, table).solve([0.5, 0, 0, 0, 0])  # biceps, brachialis, brachioradialis, triceps, anconeus
