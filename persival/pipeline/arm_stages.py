@@ -92,18 +92,21 @@ def _pushes(moments, model, console) -> dict:
     report = push_check(moments, tuple(m.name for m in spec.muscles if m.action == "extensor"), limits)
     within = f"{limits[0]:g}-{limits[1]:g} deg"
 
-    def said(name: str, key: str, value: str, angle: str) -> str:
+    def said(name: str, key: str, angle: str, unit: str, inside_list: str) -> str:
+        """'-16.2 N at 165 deg', and where the worst lies beyond the limits, what it is within them."""
         whole, inside = report["muscles"][name], report["muscles"][name]["in_joint_range"]
-        text = f"{value.format(whole[key])} at {whole[angle]:g} deg"
+        digits = 1 if unit == "N" else 0
+        text = f"{whole[key]:.{digits}f} {unit} at {whole[angle]:g} deg"
         if inside.get(angle) == whole[angle]:
             return text
-        flagged = name in report["pushing_in_joint_range" if key == "least_tension_N"
-                                else "passive_extensors_flexing_in_joint_range"]
-        return text + (f" ({value.format(inside[key])} at {inside[angle]:g} deg within {within})" if flagged
-                       else f" (not within {within})")
+        if name not in report[inside_list]:
+            return f"{text} (not within {within})"
+        return f"{text} ({inside[key]:.{digits}f} {unit} at {inside[angle]:g} deg within {within})"
 
-    bad = [f"{name} pushes " + said(name, "least_tension_N", "{:.1f} N", "at_deg") for name in report["pushing"]]
-    bad += [f"passive {name} flexes " + said(name, "passive_moment_max_Nmm", "{:.0f} N mm", "passive_moment_at_deg")
+    bad = [f"{name} pushes " + said(name, "least_tension_N", "at_deg", "N", "pushing_in_joint_range")
+           for name in report["pushing"]]
+    bad += [f"passive {name} flexes " + said(name, "passive_moment_max_Nmm", "passive_moment_at_deg", "N mm",
+                                             "passive_extensors_flexing_in_joint_range")
             for name in report["passive_extensors_flexing"]]
     console.print("  no muscle pushes" if not bad else f"  [yellow]{'; '.join(bad)}[/yellow] (a muscle should pull, "
                   f"at least {report['limit_N']:g} N, and a passive extensor never flex: docs/arm_model.md)")
