@@ -168,7 +168,7 @@ def test_model_list_and_init_from_a_variant(tmp_path):
     for name in packaged_models():
         assert name in listing.output
     assert "five muscles lofted through atlas outlines" in listing.output  # the file's own comment says what it is
-    assert "spindle muscles without walls" in listing.output
+    assert "spindle muscles along straight or bowed lines" in listing.output
     out = tmp_path / "spindle.toml"
     result = runner.invoke(app, ["model", "init", "--from", "spindle_arm", "--out", str(out)])
     assert result.exit_code == 0, result.output
